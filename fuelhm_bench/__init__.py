@@ -1,0 +1,7 @@
+"""fuelhm-bench: a health-monitoring benchmark for a turbofan fuel-system actuation loop."""
+
+from fuelhm_bench.taxonomy import EFFECT_IDS, INDICATOR_NAMES, INDICATOR_UNITS, MODE_IDS
+
+__version__ = "0.1.0"
+
+__all__ = ["EFFECT_IDS", "INDICATOR_NAMES", "INDICATOR_UNITS", "MODE_IDS", "__version__"]

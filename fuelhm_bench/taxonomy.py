@@ -1,0 +1,39 @@
+"""The benchmark's vocabulary: degradation modes, indicators, optional effects.
+
+These names are part of the public interface (file columns, YAML keys, CLI
+arguments, method outputs); they never change within a major version.
+"""
+
+from __future__ import annotations
+
+#: The seven degradation modes of the paper's Table III, in the paper's order.
+MODE_IDS: tuple[str, ...] = (
+    "filter_contamination",
+    "null_bias_drift",
+    "backlash",
+    "spool_friction",
+    "radial_clearance",
+    "internal_leakage",
+    "diaphragm_clogging",
+)
+
+#: The ten indicators of the paper's Table I, in the paper's order.
+INDICATOR_NAMES: tuple[str, ...] = (
+    "X1", "Y1", "X2", "Y2", "Inb", "I0", "Hys0", "G_in", "G_out", "G_null",
+)
+
+#: Units of the indicators at the data boundary (currents in mA, velocities in
+#: mm/s; a gain in mm/s per mA equals the same number in m/s per A).
+INDICATOR_UNITS: dict[str, str] = {
+    "X1": "mA", "Y1": "mm/s", "X2": "mA", "Y2": "mm/s", "Inb": "mA", "I0": "mA",
+    "Hys0": "mA", "G_in": "mm/s/mA", "G_out": "mm/s/mA", "G_null": "mm/s/mA",
+}
+
+#: Optional physical effects a nominal model omits (PHYSICS.md section 7).
+EFFECT_IDS: tuple[str, ...] = (
+    "spool_overlap",
+    "spool_flow_force",
+    "rod_friction",
+    "lvdt_lag",
+    "load_stiffness",
+)
