@@ -1,0 +1,395 @@
+"""The common method interface: :class:`BaseMethod`, and the causal harness.
+
+A method sees healthy training flights once (``fit``), then, unit by unit,
+flight by flight, one observation at a time (``start_unit`` then ``decide``).
+The harness functions :func:`run_unit` / :func:`run_table` only ever call
+``start_unit`` and ``decide``, so whatever a method does it cannot look ahead.
+"""
+
+from __future__ import annotations
+
+import abc
+import copy
+import hashlib
+import inspect
+import numbers
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+import pandas as pd
+
+from fuelhm_bench.errors import DataFormatError, MethodError, ParameterError
+from fuelhm_bench.methods.decision import Decision, _raise_if_invalid
+from fuelhm_bench.methods.knowledge import Knowledge
+from fuelhm_bench.methods.params import validate_params
+from fuelhm_bench.methods.tables import (DECISION_COLUMNS, GUILT_COLUMNS,
+                                         check_indicator_table, empty_decisions)
+from fuelhm_bench.taxonomy import MODE_IDS
+
+__all__ = ["BaseMethod", "clone_method", "run_table", "run_unit"]
+
+
+class BaseMethod(abc.ABC):
+    """Base class of every detection/diagnosis method (scikit-learn style).
+
+    Subclasses declare their hyperparameters as keyword-only arguments of
+    ``__init__`` and store each one unchanged under the same name; nothing
+    else happens in ``__init__`` (validation and derived quantities belong to
+    ``fit``; fitted attributes end with ``_``). They implement:
+
+    * ``_fit(healthy_indicators, *, knowledge, raw_flights, rng)``: learn from
+      healthy flights only;
+    * ``_decide(row) -> Decision``: decide for one flight, using only the
+      current row and the per-unit history the method keeps itself;
+    * optionally ``_start_unit(unit_id)``: reset that per-unit history.
+
+    The public ``fit``, ``start_unit`` and ``decide`` wrap them with input
+    checks, seeding and output validation.
+
+    Attributes
+    ----------
+    seed_entropy_ : int
+        Entropy of the seed resolved in ``fit``.
+    rng_ : numpy.random.Generator
+        Generator for ``_fit`` (derived from ``seed_entropy_``).
+    unit_rng_ : numpy.random.Generator
+        Generator for the current unit, re-created by ``start_unit`` from
+        ``seed_entropy_`` and the unit id, so that a unit's decisions do not
+        depend on which units were processed before.
+    is_fitted_ : bool
+        True after a successful ``fit``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fuelhm_bench.methods import BaseMethod, Decision
+    >>> from fuelhm_bench.taxonomy import INDICATOR_NAMES
+    >>> class FirstIndicator(BaseMethod):
+    ...     def __init__(self, *, a=3.0):
+    ...         self.a = a
+    ...     def _fit(self, healthy, *, knowledge, raw_flights, rng):
+    ...         x = healthy["X1"].to_numpy(float)
+    ...         self.mu_, self.sigma_ = np.nanmean(x), np.nanstd(x)
+    ...     def _decide(self, row):
+    ...         z = abs(row["X1"] - self.mu_) / self.sigma_
+    ...         z = 0.0 if np.isnan(z) else float(z)
+    ...         guilt = np.eye(7)[1] if z > self.a else np.zeros(7)
+    ...         return Decision(score=z, alarm=z > self.a, guilt=guilt)
+    >>> FirstIndicator(a=2.0)
+    FirstIndicator(a=2.0)
+    """
+
+    #: Declared hyperparameter constraints, see :mod:`fuelhm_bench.methods.params`.
+    _parameter_constraints: ClassVar[dict[str, tuple]] = {}
+
+    # ------------------------------------------------------------------ params
+    @classmethod
+    def _get_param_names(cls) -> list[str]:
+        init = cls.__init__
+        if init is object.__init__:
+            return []
+        sig = inspect.signature(init)
+        names = []
+        for p in sig.parameters.values():
+            if p.name == "self":
+                continue
+            if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+                raise MethodError(f"{cls.__name__}.__init__ must declare its hyperparameters "
+                                  f"explicitly; it has *{p.name}.")
+            names.append(p.name)
+        return sorted(names)
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """Hyperparameters of this method (the constructor arguments).
+
+        Parameters
+        ----------
+        deep : bool, default=True
+            Also return the parameters of nested methods as ``name__param``.
+
+        Returns
+        -------
+        dict of str to object
+        """
+        out: dict[str, Any] = {}
+        for name in self._get_param_names():
+            value = getattr(self, name)
+            if deep and hasattr(value, "get_params") and not isinstance(value, type):
+                out.update({f"{name}__{k}": v for k, v in value.get_params(deep=True).items()})
+            out[name] = value
+        return out
+
+    def set_params(self, **params: Any) -> "BaseMethod":
+        """Set hyperparameters (``name`` or ``nested__name``); returns self.
+
+        Raises
+        ------
+        ParameterError
+            For an unknown parameter name.
+        """
+        valid = set(self._get_param_names())
+        nested: dict[str, dict[str, Any]] = {}
+        for key, value in params.items():
+            name, sep, sub = key.partition("__")
+            if name not in valid:
+                raise ParameterError(f"The '{name}' parameter of {type(self).__name__} must be "
+                                     f"one of {sorted(valid)}. Got {name!r} instead.")
+            if sep:
+                nested.setdefault(name, {})[sub] = value
+            else:
+                setattr(self, name, value)
+        for name, sub_params in nested.items():
+            getattr(self, name).set_params(**sub_params)
+        return self
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params(deep=False).items())
+        return f"{type(self).__name__}({args})"
+
+    # --------------------------------------------------------------- fitting
+    def fit(self, healthy_indicators: pd.DataFrame, *, knowledge: Knowledge | None = None,
+            raw_flights: Any = None, random_state: Any = None) -> "BaseMethod":
+        """Learn from healthy training flights only.
+
+        Parameters
+        ----------
+        healthy_indicators : pandas.DataFrame
+            Indicator table of healthy flights (one row per flight; see
+            docs/methods.md). Not modified.
+        knowledge : Knowledge or None, default=None
+            Published knowledge (ITL, signatures, maximal intensities).
+        raw_flights : object, default=None
+            Raw flight samples of the same healthy flights, for methods that
+            work on samples (DATA.md long format), or None.
+        random_state : int, numpy.random.Generator or None, default=None
+            Seed. When None, the ``random_state`` hyperparameter is used if the
+            method has one; when both are None a fresh OS seed is drawn (the
+            benchmark runner always passes one).
+
+        Returns
+        -------
+        self
+        """
+        owner = f"{type(self).__name__}.fit"
+        validate_params(type(self).__name__, self.get_params(deep=False),
+                        type(self)._parameter_constraints)
+        check_indicator_table(healthy_indicators, name="healthy_indicators", owner=owner)
+        if knowledge is not None and not isinstance(knowledge, Knowledge):
+            raise ParameterError(f"The 'knowledge' parameter of {owner} must be a Knowledge or "
+                                 f"None. Got {type(knowledge).__name__} instead.")
+        seed = random_state if random_state is not None else getattr(self, "random_state", None)
+        self.seed_entropy_ = _resolve_entropy(seed, owner)
+        self.rng_ = np.random.default_rng(np.random.SeedSequence(self.seed_entropy_,
+                                                                 spawn_key=(0,)))
+        self._stream_unit = None
+        self._stream_last_index = None
+        self.is_fitted_ = False
+        self._fit(healthy_indicators, knowledge=knowledge, raw_flights=raw_flights, rng=self.rng_)
+        self.is_fitted_ = True
+        return self
+
+    @abc.abstractmethod
+    def _fit(self, healthy_indicators: pd.DataFrame, *, knowledge: Knowledge | None,
+             raw_flights: Any, rng: np.random.Generator) -> None:
+        """Learn from healthy flights (subclass hook; must not modify its inputs)."""
+
+    # -------------------------------------------------------------- deciding
+    def start_unit(self, unit_id: Any) -> None:
+        """Start the flight sequence of a unit: reset the per-unit history.
+
+        Parameters
+        ----------
+        unit_id : int or str
+            Identifier of the unit (actuator / engine serial).
+        """
+        self._check_fitted("start_unit")
+        self._stream_unit = unit_id
+        self._stream_last_index = None
+        self.unit_rng_ = np.random.default_rng(np.random.SeedSequence(
+            self.seed_entropy_, spawn_key=(1, _stable_key(unit_id))))
+        self._start_unit(unit_id)
+
+    def _start_unit(self, unit_id: Any) -> None:
+        """Reset the per-unit history (subclass hook; default: nothing to reset)."""
+        return None
+
+    def decide(self, observation_row: pd.Series | Mapping) -> Decision:
+        """Decide for the next flight of the current unit.
+
+        Parameters
+        ----------
+        observation_row : pandas.Series or mapping
+            One row of the indicator table (indicators, ``<name>_valid``,
+            ``n_points``, ``quality_reason``, ``flight_id``, ``unit_id``,
+            ``flight_index``). Flights must come in increasing ``flight_index``.
+
+        Returns
+        -------
+        Decision
+
+        Raises
+        ------
+        MethodError
+            When the method is not fitted, ``start_unit`` was not called, or the
+            method returns an invalid decision.
+        DataFormatError
+            When the row belongs to another unit or comes out of order.
+        """
+        self._check_fitted("decide")
+        if getattr(self, "_stream_unit", None) is None:
+            raise MethodError(f"{type(self).__name__}.decide was called before start_unit.")
+        row = observation_row if isinstance(observation_row, pd.Series) else pd.Series(
+            dict(observation_row))
+        if "unit_id" in row.index and row["unit_id"] != self._stream_unit:
+            raise DataFormatError(f"The 'observation_row' parameter of {type(self).__name__}"
+                                  f".decide must belong to unit {self._stream_unit!r}. Got unit "
+                                  f"{row['unit_id']!r} instead.")
+        if "flight_index" in row.index:
+            k = int(row["flight_index"])
+            if self._stream_last_index is not None and k <= self._stream_last_index:
+                raise DataFormatError(f"The 'observation_row' parameter of {type(self).__name__}"
+                                      f".decide must come in increasing flight_index order. Got "
+                                      f"flight {k} after flight {self._stream_last_index} instead.")
+            self._stream_last_index = k
+        decision = self._decide(row)
+        return _raise_if_invalid(decision, type(self).__name__, f"for unit {self._stream_unit!r}")
+
+    @abc.abstractmethod
+    def _decide(self, row: pd.Series) -> Decision:
+        """Decide for one flight (subclass hook)."""
+
+    def decide_unit(self, unit_table: pd.DataFrame) -> pd.DataFrame:
+        """Decide for every flight of one unit, causally (see :func:`run_unit`)."""
+        return run_unit(self, unit_table)
+
+    def decide_table(self, indicators: pd.DataFrame) -> pd.DataFrame:
+        """Decide for every flight of every unit, causally (see :func:`run_table`)."""
+        return run_table(self, indicators)
+
+    def _check_fitted(self, what: str) -> None:
+        if not getattr(self, "is_fitted_", False):
+            raise MethodError(f"{type(self).__name__} is not fitted: call fit before {what}.")
+
+
+# ---------------------------------------------------------------------------
+def run_unit(method: Any, unit_table: pd.DataFrame) -> pd.DataFrame:
+    """Run a fitted method on one unit, flight by flight, in flight order.
+
+    Only ``method.start_unit`` and ``method.decide`` are called (never a
+    method's own ``decide_unit``), one row at a time: the decision for flight
+    ``k`` is made before flight ``k + 1`` is shown.
+
+    Parameters
+    ----------
+    method : BaseMethod
+        A fitted method.
+    unit_table : pandas.DataFrame
+        Indicator rows of a single unit (columns ``unit_id``, ``flight_index`` and
+        the indicators); sorted by ``flight_index`` here (the input is not
+        modified).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`DECISION_COLUMNS`: ``unit_id, flight_index, score, alarm,
+        guilt_<mode>`` x 7, one row per flight in flight order.
+
+    Raises
+    ------
+    DataFormatError
+        When the table holds several units or repeated flight indices.
+    """
+    owner = "run_unit"
+    check_indicator_table(unit_table, name="unit_table", owner=owner,
+                          keys=("unit_id", "flight_index"))
+    units = pd.unique(unit_table["unit_id"])
+    if len(units) != 1:
+        raise DataFormatError(f"The 'unit_table' parameter of {owner} must hold a single unit. "
+                              f"Got {len(units)} units instead.")
+    if unit_table["flight_index"].duplicated().any():
+        dup = unit_table["flight_index"][unit_table["flight_index"].duplicated()].iloc[0]
+        raise DataFormatError(f"The 'unit_table' parameter of {owner} must have unique "
+                              f"flight_index values. Got flight {dup} twice instead.")
+    ordered = unit_table.sort_values("flight_index", kind="stable")
+    unit_id = units[0]
+    method.start_unit(unit_id)
+    n = len(ordered)
+    scores = np.empty(n)
+    alarms = np.empty(n, dtype=bool)
+    guilt = np.empty((n, len(MODE_IDS)))
+    name = type(method).__name__
+    for i in range(n):
+        row = ordered.iloc[i]
+        d = _raise_if_invalid(method.decide(row), name,
+                              f"for unit {unit_id!r}, flight {row['flight_index']}")
+        scores[i], alarms[i], guilt[i] = d.score, d.alarm, d.guilt
+    out = {"unit_id": ordered["unit_id"].to_numpy(),
+           "flight_index": ordered["flight_index"].to_numpy(dtype=np.int64),
+           "score": scores, "alarm": alarms}
+    out.update({c: guilt[:, j] for j, c in enumerate(GUILT_COLUMNS)})
+    return pd.DataFrame(out, columns=list(DECISION_COLUMNS))
+
+
+def run_table(method: Any, indicators: pd.DataFrame) -> pd.DataFrame:
+    """Run a fitted method on every unit of an indicator table (:func:`run_unit` per unit).
+
+    Parameters
+    ----------
+    method : BaseMethod
+        A fitted method.
+    indicators : pandas.DataFrame
+        Indicator table with ``unit_id`` and ``flight_index``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Decisions table (:data:`DECISION_COLUMNS`), units in order of first
+        appearance, flights in flight order.
+    """
+    check_indicator_table(indicators, name="indicators", owner="run_table",
+                          keys=("unit_id", "flight_index"))
+    parts = [run_unit(method, group)
+             for _, group in indicators.groupby("unit_id", sort=False, dropna=False)]
+    if not parts:
+        return empty_decisions()
+    return pd.concat(parts, ignore_index=True)
+
+
+def clone_method(method: Any) -> Any:
+    """An unfitted copy with the same hyperparameters (like ``sklearn.base.clone``).
+
+    Parameters
+    ----------
+    method : BaseMethod
+        Any object with ``get_params``.
+
+    Returns
+    -------
+    BaseMethod
+        ``type(method)(**params)``, nested methods cloned, other values deep-copied.
+    """
+    params = method.get_params(deep=False)
+    new_params = {k: (clone_method(v) if hasattr(v, "get_params") and not isinstance(v, type)
+                      else copy.deepcopy(v)) for k, v in params.items()}
+    return type(method)(**new_params)
+
+
+def _resolve_entropy(seed: Any, owner: str) -> int:
+    if seed is None:
+        return int(np.random.SeedSequence().entropy)
+    if isinstance(seed, np.random.Generator):
+        return int(seed.integers(0, 2**63 - 1))
+    if isinstance(seed, numbers.Integral) and not isinstance(seed, (bool, np.bool_)) and seed >= 0:
+        return int(seed)
+    raise ParameterError(f"The 'random_state' parameter of {owner} must be a non-negative int, a "
+                         f"numpy.random.Generator or None. Got {seed!r} instead.")
+
+
+def _stable_key(unit_id: Any) -> int:
+    """A platform- and session-independent 32-bit key for a unit id."""
+    if isinstance(unit_id, numbers.Integral) and not isinstance(unit_id, (bool, np.bool_)):
+        text = f"int:{int(unit_id)}"
+    else:
+        text = f"str:{unit_id}"
+    return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=4).digest(), "little")

@@ -1,0 +1,52 @@
+"""The scorer: from labels + decisions (+ healthy-training scores) to the paper's tables.
+
+Public API
+----------
+Run, ScoringConfig, score_run, Scorecard, headline_kpis
+    Score one run.
+flight_table, detection_table, detection_by_band, diagnosis_table,
+classification_table, confusion_matrix, detection_delays, delay_summary,
+summary_components, summary_score
+    The individual tables (Table V, Table VI, FCR, confusion, delays, summary).
+fit_healthy_model, HealthyScoreModel, threshold_table
+    Thresholds ``mu + A sigma`` from healthy-training scores only (paper eq. 10).
+wilson_interval, bootstrap_ratio_interval, rates_with_intervals
+    Confidence intervals.
+robustness, robustness_table
+    Nominal vs drifted runs.
+perfect_decisions, null_decisions
+    Reference decisions (oracle and never-alarm).
+to_markdown, to_latex, write_tables, plot_score_distributions, save_figure
+    Export.
+
+See docs/scoring.md for every definition with worked examples.
+"""
+
+from fuelhm_bench.scoring.config import ScoringConfig
+from fuelhm_bench.scoring.delay import delay_summary, detection_delays
+from fuelhm_bench.scoring.detection import (ALL_MODES, METHOD_ALARM, detection_by_band,
+                                            detection_table)
+from fuelhm_bench.scoring.diagnosis import (classification_table, confusion_matrix,
+                                            diagnosis_table)
+from fuelhm_bench.scoring.export import to_latex, to_markdown, write_tables
+from fuelhm_bench.scoring.figures import plot_score_distributions, save_figure
+from fuelhm_bench.scoring.intervals import (bootstrap_ratio_interval, rates_with_intervals,
+                                            wilson_interval)
+from fuelhm_bench.scoring.reference import null_decisions, perfect_decisions
+from fuelhm_bench.scoring.robustness import robustness, robustness_table
+from fuelhm_bench.scoring.run import (HEALTHY, LABEL_COLUMNS, MULTIPLE, NO_ALARM, TIE, Run,
+                                      flight_table)
+from fuelhm_bench.scoring.scorecard import HEADLINE_KPIS, Scorecard, headline_kpis, score_run
+from fuelhm_bench.scoring.summary import summary_components, summary_score
+from fuelhm_bench.scoring.thresholds import HealthyScoreModel, fit_healthy_model, threshold_table
+
+__all__ = [
+    "ALL_MODES", "HEADLINE_KPIS", "HEALTHY", "HealthyScoreModel", "LABEL_COLUMNS", "METHOD_ALARM",
+    "MULTIPLE", "NO_ALARM", "Run", "Scorecard", "ScoringConfig", "TIE", "bootstrap_ratio_interval",
+    "classification_table", "confusion_matrix", "delay_summary", "detection_by_band",
+    "detection_delays", "detection_table", "diagnosis_table", "fit_healthy_model",
+    "flight_table", "headline_kpis", "null_decisions", "perfect_decisions",
+    "plot_score_distributions", "rates_with_intervals", "robustness", "robustness_table",
+    "save_figure", "score_run", "summary_components", "summary_score", "threshold_table",
+    "to_latex", "to_markdown", "wilson_interval", "write_tables",
+]
