@@ -1,0 +1,243 @@
+"""Mission profile: engine speed, position demand, temperature and phases of a flight.
+
+A flight is: engine start (N2 spools up to ground idle, then the FADEC strokes
+the actuator end to end: the *test sweep*), taxi, take-off, climb, cruise,
+descent, approach, landing (with reverse thrust) and taxi-in. N2 follows each
+phase's set point through a first-order engine lag, with random throttle steps
+(operating variability). The variable-geometry demand is scheduled on N2
+(closed at low speed, open at high speed), so the actuator moves mostly in
+transients. The supply pressure follows N2 inside the physics (see
+:class:`~fuelhm_bench.physics.fluid.FluidParams`). Fuel temperature drifts over
+the flight (recorded; the nominal model has no temperature effect).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fuelhm_bench.errors import range_error
+from fuelhm_bench.physics._validation import NON_NEGATIVE, POSITIVE, check_fields
+from fuelhm_bench.physics.simulate import FlightInputs
+
+#: Phase names, their share of the time after engine start, and their N2 set point [-].
+PHASES: tuple[tuple[str, float, float], ...] = (
+    ("taxi", 0.05, 0.62),
+    ("take_off", 0.02, 1.00),
+    ("climb", 0.15, 0.95),
+    ("cruise", 0.50, 0.85),
+    ("descent", 0.12, 0.66),
+    ("approach", 0.08, 0.74),
+    ("landing", 0.03, 0.60),
+    ("taxi_in", 0.05, 0.60),
+)
+PHASE_NAMES: tuple[str, ...] = ("engine_start",) + tuple(p[0] for p in PHASES)
+
+
+@dataclass(frozen=True)
+class MissionProfile:
+    """Parameters of the flight profile.
+
+    Parameters
+    ----------
+    duration_s : float, default=3600.0
+        Flight duration [s], at least ``start_duration_s + 60``.
+    frame_s : float, default=0.01
+        Sample (controller frame) period [s].
+    start_duration_s : float, default=60.0
+        Engine start including the actuator test sweep [s].
+    test_sweep : bool, default=True
+        Whether the FADEC strokes the actuator end to end during engine start.
+    sweep_low_m, sweep_high_m : float, default=0.003, 0.057
+        Demand extremes of the test sweep and of the N2 schedule [m].
+    schedule_n2_low, schedule_n2_high : float, default=0.55, 1.0
+        N2 range over which the demand moves from low to high [-].
+    engine_time_constant_s : float, default=3.0
+        First-order lag of N2 towards the phase set point [s].
+    throttle_step_std : float, default=0.025
+        Standard deviation of random throttle steps around the set point [-].
+    throttle_step_interval_s : float, default=90.0
+        Mean interval between throttle steps [s].
+    n2_noise_std : float, default=0.002
+        Small per-frame N2 fluctuation [-].
+    fuel_temp_start_degc, fuel_temp_end_degc : float, default=15.0, 70.0
+        Mean fuel temperature at start and end [degC] (each flight draws around them).
+    """
+
+    duration_s: float = 3600.0
+    frame_s: float = 0.01
+    start_duration_s: float = 60.0
+    test_sweep: bool = True
+    sweep_low_m: float = 0.003
+    sweep_high_m: float = 0.057
+    schedule_n2_low: float = 0.55
+    schedule_n2_high: float = 1.0
+    engine_time_constant_s: float = 3.0
+    throttle_step_std: float = 0.025
+    throttle_step_interval_s: float = 90.0
+    n2_noise_std: float = 0.002
+    fuel_temp_start_degc: float = 15.0
+    fuel_temp_end_degc: float = 70.0
+
+    def __post_init__(self) -> None:
+        check_fields(self, {
+            "duration_s": POSITIVE,
+            "frame_s": (1e-4, 1.0, True),
+            "start_duration_s": (20.0, 600.0, True),
+            "sweep_low_m": NON_NEGATIVE,
+            "sweep_high_m": POSITIVE,
+            "schedule_n2_low": (0.0, 1.2, True),
+            "schedule_n2_high": (0.0, 1.2, True),
+            "engine_time_constant_s": POSITIVE,
+            "throttle_step_std": (0.0, 0.2, True),
+            "throttle_step_interval_s": POSITIVE,
+            "n2_noise_std": (0.0, 0.05, True),
+            "fuel_temp_start_degc": (-60.0, 150.0, True),
+            "fuel_temp_end_degc": (-60.0, 150.0, True),
+        })
+        if self.duration_s < self.start_duration_s + 60.0:
+            raise range_error("MissionProfile.duration_s", f">= start_duration_s + 60 ({self.start_duration_s + 60:g} s)",
+                              self.duration_s)
+        if self.sweep_high_m <= self.sweep_low_m:
+            raise range_error("MissionProfile.sweep_high_m", f"> sweep_low_m ({self.sweep_low_m:g})", self.sweep_high_m)
+        if self.schedule_n2_high <= self.schedule_n2_low:
+            raise range_error("MissionProfile.schedule_n2_high", f"> schedule_n2_low ({self.schedule_n2_low:g})",
+                              self.schedule_n2_high)
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames in a flight."""
+        return int(round(self.duration_s / self.frame_s))
+
+    def demand_from_n2(self, n2: np.ndarray) -> np.ndarray:
+        """Scheduled position demand [m] for engine speed ``n2`` [-]."""
+        frac = np.clip((n2 - self.schedule_n2_low) / (self.schedule_n2_high - self.schedule_n2_low), 0.0, 1.0)
+        return self.sweep_low_m + frac * (self.sweep_high_m - self.sweep_low_m)
+
+    def sample(self, rng: np.random.Generator) -> FlightInputs:
+        """Draw one flight's inputs.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            Source of the operating variability.
+
+        Returns
+        -------
+        FlightInputs
+            With extras ``n2_pct``, ``fuel_temp_degC``, ``phase`` (phase index into
+            :data:`PHASE_NAMES`) and ``demand_mm``.
+        """
+        T = self.frame_s
+        n = self.n_frames
+        t = np.arange(n) * T
+        n_start = min(int(round(self.start_duration_s / T)), n)
+        # Phase set points after the start, with durations jittered by +/-20 %.
+        shares = np.array([p[1] for p in PHASES]) * rng.uniform(0.8, 1.2, len(PHASES))
+        shares /= shares.sum()
+        bounds = n_start + np.round(np.cumsum(np.concatenate([[0.0], shares])) * (n - n_start)).astype(int)
+        bounds[-1] = n
+        target = np.empty(n)
+        phase = np.zeros(n, dtype=np.int8)
+        idle = 0.6 + rng.normal(0.0, 0.01)
+        target[:n_start] = idle
+        for j, (_, _, n2_set) in enumerate(PHASES):
+            target[bounds[j]:bounds[j + 1]] = n2_set + rng.normal(0.0, 0.01)
+            phase[bounds[j]:bounds[j + 1]] = j + 1
+        # Throttle steps (operating variability) after the start.
+        n_steps = rng.poisson((n - n_start) * T / self.throttle_step_interval_s)
+        if n_steps:
+            starts = np.sort(rng.integers(n_start, n, n_steps))
+            lengths = rng.integers(int(5 / T), int(60 / T) + 1, n_steps)
+            amps = rng.normal(0.0, self.throttle_step_std, n_steps)
+            for s, ln, a in zip(starts, lengths, amps):
+                target[s:s + ln] += a
+        # Reverse thrust burst at landing.
+        land = bounds[PHASE_NAMES.index("landing") - 1]
+        target[land + int(3 / T): land + int(15 / T)] = 0.85
+        # Engine start: spool-up from 0 over the first 40 % of the start.
+        n_spool = int(0.4 * n_start)
+        target[:n_spool] = idle * np.linspace(0.0, 1.0, max(n_spool, 1)) ** 0.5
+        # First-order engine lag (exact discrete update), then small fluctuations.
+        a = np.exp(-T / self.engine_time_constant_s)
+        from scipy.signal import lfilter
+
+        n2 = lfilter([1 - a], [1, -a], target, zi=[a * target[0]])[0]
+        n2[:n_spool] = target[:n_spool]
+        n2 = np.clip(n2 + rng.normal(0.0, self.n2_noise_std, n) * (t >= self.start_duration_s), 0.0, 1.15)
+        demand = self.demand_from_n2(n2)
+        if self.test_sweep and n_start > 0:
+            # End-to-end stroke at ground idle: low, high, low, then the schedule.
+            lo, hi = self.sweep_low_m, self.sweep_high_m
+            seg = np.array([0.4, 0.55, 0.7, 0.85]) * n_start
+            i0, i1, i2, i3 = seg.astype(int)
+            demand[i0:i1] = hi
+            demand[i1:i2] = lo
+            demand[i2:i3] = 0.5 * (lo + hi)
+        temp0 = self.fuel_temp_start_degc + rng.normal(0.0, 8.0)
+        temp1 = self.fuel_temp_end_degc + rng.normal(0.0, 8.0)
+        tau = 0.3 * self.duration_s
+        fuel_temp = temp1 + (temp0 - temp1) * np.exp(-t / tau)
+        extras = {
+            "n2_pct": 100.0 * n2,
+            "fuel_temp_degC": fuel_temp,
+            "phase": phase,
+            "demand_mm": 1e3 * demand,
+        }
+        return FlightInputs(demand, n2, T, extras=extras)
+
+
+@dataclass(frozen=True)
+class VelocityGainSweep:
+    """The paper's velocity-gain sweep (section IV.B): a slow open-loop current ramp.
+
+    The current ramps from the lower to the upper saturation and back (both
+    directions, so that hysteresis shows), at constant engine speed, on a
+    virtual bench without end stops.
+
+    Parameters
+    ----------
+    current_min_a, current_max_a : float, default=-10e-3, 10e-3
+        Ramp extremes [A].
+    ramp_duration_s : float, default=60.0
+        Duration of each one-way ramp [s].
+    n2_frac : float, default=0.82
+        Engine speed (sets the supply pressure; 0.82 gives about 70 bar) [-].
+    frame_s : float, default=0.01
+        Frame period [s].
+    cycles : int, default=1
+        Number of up-and-down cycles.
+    """
+
+    current_min_a: float = -10e-3
+    current_max_a: float = 10e-3
+    ramp_duration_s: float = 60.0
+    n2_frac: float = 0.82
+    frame_s: float = 0.01
+    cycles: int = 1
+
+    def __post_init__(self) -> None:
+        check_fields(self, {
+            "current_min_a": (-0.1, 0.1, True),
+            "current_max_a": (-0.1, 0.1, True),
+            "ramp_duration_s": (0.1, 1e5, True),
+            "n2_frac": (0.3, 1.1, True),
+            "frame_s": (1e-4, 1.0, True),
+        })
+        if self.current_max_a <= self.current_min_a:
+            raise range_error("VelocityGainSweep.current_max_a", f"> current_min_a ({self.current_min_a:g})",
+                              self.current_max_a)
+        if not isinstance(self.cycles, int) or self.cycles < 1:
+            raise range_error("VelocityGainSweep.cycles", "an integer >= 1", self.cycles)
+
+    def inputs(self) -> FlightInputs:
+        """The sweep as :class:`FlightInputs` (open-loop current, no end stops)."""
+        n = max(int(round(self.ramp_duration_s / self.frame_s)), 2)
+        up = np.linspace(self.current_min_a, self.current_max_a, n)
+        one = np.concatenate([up, up[::-1]])
+        current = np.tile(one, self.cycles)
+        m = len(current)
+        extras = {"n2_pct": np.full(m, 100.0 * self.n2_frac), "phase": np.zeros(m, dtype=np.int8)}
+        return FlightInputs(np.zeros(m), np.full(m, self.n2_frac), self.frame_s, open_loop_current_a=current,
+                            end_stops=False, extras=extras)

@@ -1,0 +1,213 @@
+"""Optional physical effects that a nominal model omits (PHYSICS.md section 7).
+
+Each effect is a frozen dataclass with its parameters (SI units in the names)
+and their allowed ranges, registered under a stable id. A model holds a tuple of
+enabled effects; ``LoopModel.with_effect("rod_friction", coulomb_n=200.0)``
+returns a new model with the effect switched on, which is how the
+model-discrepancy workflow adds one candidate effect, fits its parameters and
+simulates again.
+
+======================  =====================================================
+id                      equation
+======================  =====================================================
+``spool_overlap``       openings ``o = +/-x_s - u``, ``u = overlap_m > 0``
+``spool_flow_force``    steady flow force acts as a centring spring on the spool:
+                        ``x_c <- x_c / (1 + k_r * dp_s/70 bar * w(|x_c|)/w_null)``
+``rod_friction``        ``F = [F_c + (F_s - F_c) exp(-(v/v_s)^2)] sgn v + b v`` on the rod,
+                        with stiction (the rod stays still while the available
+                        force is within +/-F_s)
+``lvdt_lag``            extra first-order lag ``tau`` on the measured position
+``load_stiffness``      ``F_L += k_x (x - x_ref)`` position-dependent load
+======================  =====================================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import ClassVar
+
+from fuelhm_bench.errors import ParameterError, UnknownNameError
+from fuelhm_bench.physics._validation import NON_NEGATIVE, check_fields
+from fuelhm_bench.taxonomy import EFFECT_IDS
+
+
+@dataclass(frozen=True)
+class SpoolOverlap:
+    """Spool lands overlap the ports at null.
+
+    Parameters
+    ----------
+    overlap_m : float, default=1.5e-5
+        Lap u [m], in (0, 1e-4].
+    """
+
+    id: ClassVar[str] = "spool_overlap"
+    overlap_m: float = 1.5e-5
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"overlap_m": (0.0, 1e-4, False)})
+
+
+@dataclass(frozen=True)
+class SpoolFlowForce:
+    """Steady (Bernoulli) flow force on the spool, a pressure-dependent centring spring.
+
+    Parameters
+    ----------
+    stiffness_ratio : float, default=0.25
+        Flow-force stiffness over feedback stiffness at 70 bar and null slot width [-], in (0, 3].
+    """
+
+    id: ClassVar[str] = "spool_flow_force"
+    stiffness_ratio: float = 0.25
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"stiffness_ratio": (0.0, 3.0, False)})
+
+
+@dataclass(frozen=True)
+class RodFriction:
+    """Coulomb + Stribeck + viscous friction on the rod seals and linkage.
+
+    Parameters
+    ----------
+    coulomb_n : float, default=150.0
+        Coulomb force F_c [N], in (0, 5000].
+    static_ratio : float, default=1.5
+        F_s / F_c [-], in [1, 3].
+    stribeck_velocity_m_s : float, default=0.002
+        Stribeck velocity v_s [m/s], in (0, 0.1].
+    viscous_n_s_m : float, default=0.0
+        Viscous coefficient b [N s/m], in [0, 1e5].
+    """
+
+    id: ClassVar[str] = "rod_friction"
+    coulomb_n: float = 150.0
+    static_ratio: float = 1.5
+    stribeck_velocity_m_s: float = 0.002
+    viscous_n_s_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_fields(self, {
+            "coulomb_n": (0.0, 5000.0, False),
+            "static_ratio": (1.0, 3.0, True),
+            "stribeck_velocity_m_s": (0.0, 0.1, False),
+            "viscous_n_s_m": (0.0, 1e5, True),
+        })
+
+
+@dataclass(frozen=True)
+class LvdtLag:
+    """Extra first-order lag of the LVDT demodulation.
+
+    Parameters
+    ----------
+    time_constant_s : float, default=0.02
+        Lag time constant tau [s], in (0, 0.5].
+    """
+
+    id: ClassVar[str] = "lvdt_lag"
+    time_constant_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"time_constant_s": (0.0, 0.5, False)})
+
+
+@dataclass(frozen=True)
+class LoadStiffness:
+    """Position-dependent (spring-like) load.
+
+    Parameters
+    ----------
+    stiffness_n_m : float, default=4e4
+        k_x [N/m], in [-5e5, 5e5] (positive pushes back towards ``reference_m``).
+    reference_m : float, default=0.0
+        Position of zero spring force [m], in [0, 1].
+    """
+
+    id: ClassVar[str] = "load_stiffness"
+    stiffness_n_m: float = 4e4
+    reference_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"stiffness_n_m": (-5e5, 5e5, True), "reference_m": (0.0, 1.0, True)})
+
+
+Effect = SpoolOverlap | SpoolFlowForce | RodFriction | LvdtLag | LoadStiffness
+
+EFFECTS: dict[str, type] = {cls.id: cls for cls in (SpoolOverlap, SpoolFlowForce, RodFriction, LvdtLag, LoadStiffness)}
+assert tuple(EFFECTS) == EFFECT_IDS
+
+
+def _suggest(name: str, options) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(name, list(options), n=1)
+    return f" Did you mean '{close[0]}'?" if close else ""
+
+
+def make_effect(effect_id: str, **params: float) -> Effect:
+    """Build an effect by id with (a subset of) its parameters.
+
+    Parameters
+    ----------
+    effect_id : str
+        One of :data:`fuelhm_bench.taxonomy.EFFECT_IDS`.
+    **params : float
+        Parameter overrides; unknown names are rejected.
+
+    Raises
+    ------
+    UnknownNameError
+        Unknown effect id or parameter name.
+    ParameterError
+        A parameter out of its range.
+    """
+    if effect_id not in EFFECTS:
+        raise UnknownNameError(
+            f"Unknown effect id '{effect_id}'. Allowed: {', '.join(EFFECT_IDS)}.{_suggest(effect_id, EFFECTS)}")
+    cls = EFFECTS[effect_id]
+    names = [f.name for f in dataclasses.fields(cls)]
+    for key in params:
+        if key not in names:
+            raise UnknownNameError(
+                f"Unknown parameter '{key}' for effect '{effect_id}'. Allowed: {', '.join(names)}.{_suggest(key, names)}")
+    try:
+        return cls(**{k: float(v) for k, v in params.items()})
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, ParameterError):
+            raise
+        raise ParameterError(f"Effect '{effect_id}': {exc}") from None
+
+
+def effect_parameters(effect: Effect) -> dict[str, float]:
+    """Parameters of an effect as a plain dict."""
+    return {f.name: getattr(effect, f.name) for f in dataclasses.fields(effect)}
+
+
+def parse_effect_spec(spec: str) -> Effect:
+    """Parse a CLI spec ``ID[:PARAM=VALUE,...]`` into an effect.
+
+    Examples
+    --------
+    >>> parse_effect_spec("rod_friction:coulomb_n=200")
+    RodFriction(coulomb_n=200.0, static_ratio=1.5, stribeck_velocity_m_s=0.002, viscous_n_s_m=0.0)
+    """
+    effect_id, _, rest = spec.partition(":")
+    params: dict[str, float] = {}
+    if rest:
+        for item in rest.split(","):
+            key, eq, value = item.partition("=")
+            if not eq:
+                raise ParameterError(f"Effect spec '{spec}': expected PARAM=VALUE, got '{item}'.")
+            try:
+                params[key.strip()] = float(value)
+            except ValueError:
+                raise ParameterError(
+                    f"Effect spec '{spec}': the value of '{key.strip()}' must be a number. Got '{value}' instead.") from None
+    return make_effect(effect_id.strip(), **params)
+
+
+__all__ = ["EFFECTS", "Effect", "LoadStiffness", "LvdtLag", "RodFriction", "SpoolFlowForce", "SpoolOverlap",
+           "effect_parameters", "make_effect", "parse_effect_spec", "NON_NEGATIVE"]

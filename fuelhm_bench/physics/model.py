@@ -1,0 +1,298 @@
+"""The actuation-loop model: a composition of component parameter sets and optional effects.
+
+A :class:`LoopModel` is immutable. Everything that changes a unit returns a new
+model: :meth:`LoopModel.degraded` (degradation modes), :meth:`LoopModel.with_effect`
+(optional physical effects), :meth:`LoopModel.with_parameters` (set parameters by
+dotted path, e.g. ``"servovalve.null_bias_a"`` or ``"effect.rod_friction.coulomb_n"``),
+:func:`manufacture` (seeded manufacturing dispersion). Models round-trip through
+plain dicts and YAML files (:func:`save_model`, :func:`load_model`), which is the
+format of ``fuelhm-bench calibrate`` output and of ``simulate --model``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from fuelhm_bench.errors import FuelHMError, ModelFileError, OutputPathError, UnknownNameError, range_error
+from fuelhm_bench.physics import degradations as _deg
+from fuelhm_bench.physics.controller import ControllerParams
+from fuelhm_bench.physics.cylinder import CylinderParams, LoadParams
+from fuelhm_bench.physics.driver import CurrentDriverParams
+from fuelhm_bench.physics.effects import EFFECTS, Effect, _suggest, effect_parameters, make_effect
+from fuelhm_bench.physics.fluid import FluidParams
+from fuelhm_bench.physics.lvdt import LvdtParams
+from fuelhm_bench.physics.servovalve import ServovalveParams
+
+COMPONENTS: dict[str, type] = {
+    "fluid": FluidParams,
+    "servovalve": ServovalveParams,
+    "cylinder": CylinderParams,
+    "load": LoadParams,
+    "controller": ControllerParams,
+    "driver": CurrentDriverParams,
+    "lvdt": LvdtParams,
+}
+
+MODEL_FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class LoopModel:
+    """Parameters of one actuation loop (controller, driver, servovalve, cylinder, LVDT).
+
+    Parameters
+    ----------
+    fluid, servovalve, cylinder, load, controller, driver, lvdt : parameter dataclasses
+        Component parameters (SI units in the field names); defaults are the
+        nominal values of PHYSICS.md section 3.
+    effects : tuple of effects, default=()
+        Optional physical effects switched on (at most one of each id).
+    """
+
+    fluid: FluidParams = field(default_factory=FluidParams)
+    servovalve: ServovalveParams = field(default_factory=ServovalveParams)
+    cylinder: CylinderParams = field(default_factory=CylinderParams)
+    load: LoadParams = field(default_factory=LoadParams)
+    controller: ControllerParams = field(default_factory=ControllerParams)
+    driver: CurrentDriverParams = field(default_factory=CurrentDriverParams)
+    lvdt: LvdtParams = field(default_factory=LvdtParams)
+    effects: tuple = ()
+
+    def __post_init__(self) -> None:
+        ids = [e.id for e in self.effects]
+        if len(set(ids)) != len(ids):
+            raise range_error("LoopModel.effects", "at most one effect of each id", ids)
+        # Canonical order so that equal models compare (and hash) equal.
+        object.__setattr__(self, "effects", tuple(sorted(self.effects, key=lambda e: list(EFFECTS).index(e.id))))
+
+    # ------------------------------------------------------------------ effects
+    def effect(self, effect_id: str) -> Effect | None:
+        """The enabled effect with this id, or None."""
+        for e in self.effects:
+            if e.id == effect_id:
+                return e
+        return None
+
+    def with_effect(self, effect: Effect | str, **params: float) -> LoopModel:
+        """Return a model with an effect switched on (replacing one of the same id).
+
+        Parameters
+        ----------
+        effect : effect instance or str
+            An effect, or its id (then ``params`` override its defaults).
+        **params : float
+            Parameters when ``effect`` is an id.
+        """
+        if isinstance(effect, str):
+            effect = make_effect(effect, **params)
+        kept = tuple(e for e in self.effects if e.id != effect.id)
+        return dataclasses.replace(self, effects=kept + (effect,))
+
+    def without_effect(self, effect_id: str) -> LoopModel:
+        """Return a model with an effect switched off."""
+        return dataclasses.replace(self, effects=tuple(e for e in self.effects if e.id != effect_id))
+
+    # ---------------------------------------------------------- degradations
+    def degraded(self, intensities: Mapping[str, float]) -> LoopModel:
+        """Return the model with degradation intensities applied (see :mod:`~fuelhm_bench.physics.degradations`)."""
+        return _deg.degrade(self, intensities)
+
+    # ------------------------------------------------------------ parameters
+    def get(self, path: str) -> float:
+        """Value of a parameter by dotted path (``"servovalve.null_bias_a"``, ``"effect.lvdt_lag.time_constant_s"``)."""
+        parts = path.split(".")
+        if parts[0] == "effect" and len(parts) == 3:
+            eff = self.effect(parts[1])
+            if eff is None:
+                raise UnknownNameError(f"Parameter path '{path}': effect '{parts[1]}' is not enabled in this model.")
+            return float(effect_parameters(eff)[parts[2]]) if parts[2] in effect_parameters(eff) else _bad_path(path)
+        if len(parts) != 2 or parts[0] not in COMPONENTS:
+            _bad_path(path)
+        comp = getattr(self, parts[0])
+        if not hasattr(comp, parts[1]) or parts[1] not in {f.name for f in dataclasses.fields(comp)}:
+            _bad_path(path)
+        return float(getattr(comp, parts[1]))
+
+    def with_parameters(self, values: Mapping[str, float]) -> LoopModel:
+        """Return a model with parameters set by dotted path (validated)."""
+        model = self
+        for path, value in values.items():
+            parts = path.split(".")
+            if parts[0] == "effect" and len(parts) == 3:
+                eff = model.effect(parts[1])
+                if eff is None:
+                    raise UnknownNameError(f"Parameter path '{path}': effect '{parts[1]}' is not enabled in this model.")
+                if parts[2] not in effect_parameters(eff):
+                    _bad_path(path)
+                model = model.with_effect(dataclasses.replace(eff, **{parts[2]: float(value)}))
+                continue
+            if len(parts) != 2 or parts[0] not in COMPONENTS:
+                _bad_path(path)
+            comp = getattr(model, parts[0])
+            if parts[1] not in {f.name for f in dataclasses.fields(comp)}:
+                _bad_path(path)
+            cast = int if parts[1] == "adc_bits" else float
+            model = dataclasses.replace(model, **{parts[0]: dataclasses.replace(comp, **{parts[1]: cast(value)})})
+        return model
+
+    # --------------------------------------------------------- serialisation
+    def to_dict(self) -> dict:
+        """Plain-dict representation (YAML-ready)."""
+        out: dict = {"format_version": MODEL_FORMAT_VERSION}
+        for name in COMPONENTS:
+            out[name] = dataclasses.asdict(getattr(self, name))
+        out["effects"] = {e.id: effect_parameters(e) for e in self.effects}
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping, *, source: str = "<dict>") -> LoopModel:
+        """Build a model from :meth:`to_dict` output; missing fields take nominal values.
+
+        Raises
+        ------
+        ModelFileError
+            Unknown section or field, or a value out of range, naming ``source``.
+        """
+        if not isinstance(data, Mapping):
+            raise ModelFileError(f"{source}: a model file must be a mapping of sections. Got {type(data).__name__}.")
+        version = data.get("format_version", MODEL_FORMAT_VERSION)
+        if version != MODEL_FORMAT_VERSION:
+            raise ModelFileError(f"{source}: format_version must be {MODEL_FORMAT_VERSION}. Got {version!r} instead.")
+        kwargs: dict = {}
+        for key, section in data.items():
+            if key == "format_version":
+                continue
+            if key == "effects":
+                effs = []
+                for eid, params in (section or {}).items():
+                    try:
+                        effs.append(make_effect(eid, **(params or {})))
+                    except FuelHMError as exc:
+                        raise ModelFileError(f"{source}: effects.{eid}: {exc}") from None
+                kwargs["effects"] = tuple(effs)
+                continue
+            if key not in COMPONENTS:
+                raise ModelFileError(f"{source}: unknown section '{key}'. Allowed: {', '.join(COMPONENTS)}, effects."
+                                     f"{_suggest(str(key), list(COMPONENTS) + ['effects'])}")
+            comp_cls = COMPONENTS[key]
+            names = [f.name for f in dataclasses.fields(comp_cls)]
+            section = section or {}
+            if not isinstance(section, Mapping):
+                raise ModelFileError(f"{source}: section '{key}' must be a mapping of parameters.")
+            for pname in section:
+                if pname not in names:
+                    raise ModelFileError(f"{source}: unknown parameter '{key}.{pname}'.{_suggest(str(pname), names)}")
+            try:
+                kwargs[key] = comp_cls(**dict(section))
+            except FuelHMError as exc:
+                raise ModelFileError(f"{source}: {exc}") from None
+        return cls(**kwargs)
+
+
+def _bad_path(path: str):
+    raise UnknownNameError(
+        f"Unknown parameter path '{path}'. Use 'component.field' with component in "
+        f"{', '.join(COMPONENTS)}, or 'effect.<id>.<field>'.")
+
+
+def save_model(model: LoopModel, path: str | Path, *, overwrite: bool = False, header: str | None = None) -> Path:
+    """Write a model to a YAML file (refuses to overwrite unless ``overwrite``)."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise OutputPathError(f"{path} exists; refusing to overwrite it (pass --force / overwrite=True).")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        text = yaml.safe_dump(model.to_dict(), sort_keys=False)
+        if header:
+            text = "".join(f"# {line}\n" for line in header.splitlines()) + text
+        path.write_text(text)
+    except OSError as exc:
+        raise OutputPathError(f"Cannot write the model file {path}: {exc.strerror or exc}.") from None
+    return path
+
+
+def load_model(path: str | Path) -> LoopModel:
+    """Load a model YAML file (safe loader), with errors naming the file and field."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ModelFileError(f"Cannot read the model file {path}: {exc.strerror or exc}.") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ModelFileError(f"{path}: not valid YAML: {exc}") from None
+    return LoopModel.from_dict(data or {}, source=str(path))
+
+
+@dataclass(frozen=True)
+class Dispersion:
+    """Manufacturing dispersion of a unit around its nominal parameters.
+
+    Each listed parameter is multiplied by ``1 + rel_std * N(0, 1)`` (truncated
+    at 3 sigma) except additive ones (currents in A, drawn as ``+ std * N(0,1)``).
+
+    Parameters
+    ----------
+    scale : float, default=1.0
+        Multiplies every standard deviation (0 gives identical units).
+    relative : tuple of (path, rel_std)
+        Multiplicative dispersions.
+    additive : tuple of (path, std)
+        Additive dispersions (SI units).
+    """
+
+    scale: float = 1.0
+    relative: tuple = (
+        ("servovalve.spool_time_constant_s", 0.05),
+        ("servovalve.slot_width_null_m", 0.02),
+        ("servovalve.slot_width_outer_m", 0.02),
+        ("servovalve.radial_clearance_m", 0.05),
+        ("servovalve.discharge_coefficient", 0.02),
+        ("servovalve.rated_current_a", 0.02),
+        ("servovalve.spool_friction_n", 0.10),
+        ("cylinder.diaphragm_diameter_m", 0.03),
+        ("load.aero_force_at_100pct_n", 0.10),
+        ("driver.gain", 0.01),
+    )
+    additive: tuple = (
+        ("servovalve.null_bias_a", 1e-4),
+        ("driver.offset_a", 2e-5),
+    )
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.scale, (int, float)) and math.isfinite(self.scale) and 0.0 <= self.scale <= 10.0):
+            raise range_error("Dispersion.scale", "in [0, 10]", self.scale)
+
+
+def manufacture(nominal: LoopModel, rng: np.random.Generator, dispersion: Dispersion = Dispersion()) -> LoopModel:
+    """Draw one manufactured unit around ``nominal`` (seeded, deterministic).
+
+    Parameters
+    ----------
+    nominal : LoopModel
+        Nominal model.
+    rng : numpy.random.Generator
+        Source of randomness (the only one).
+    dispersion : Dispersion
+        Dispersion specification.
+
+    Returns
+    -------
+    LoopModel
+    """
+    n_rel = len(dispersion.relative)
+    draws = np.clip(rng.standard_normal(n_rel + len(dispersion.additive)), -3.0, 3.0) * dispersion.scale
+    values: dict[str, float] = {}
+    for (path, std), z in zip(dispersion.relative, draws[:n_rel]):
+        values[path] = nominal.get(path) * (1.0 + std * z)
+    for (path, std), z in zip(dispersion.additive, draws[n_rel:]):
+        values[path] = nominal.get(path) + std * z
+    return nominal.with_parameters(values)
