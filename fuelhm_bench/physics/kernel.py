@@ -246,11 +246,13 @@ def _table_lookup(table, x_s, j, fw, n2, smax, x_scale):
 
 
 @numba.njit(cache=True)
-def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s, noise, i_open, n,
+def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s, noise, i_open, x_force, n,
                  x0, out_i, out_y, out_x, out_v):
     """Simulate one flight of ``n`` frames; fills the output arrays; returns a status code.
 
     ``i_open`` holds open-loop currents [A] (NaN: closed loop, use the controller).
+    ``x_force`` holds imposed rod positions [m] at the start of each frame (NaN: free),
+    used to replay measured flights (the rod state is reset, the LVDT filter is not).
     """
     T = k[K_FRAME]
     t1 = T * GAUSS_LO
@@ -280,6 +282,8 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
     x_scale = (table.shape[0] - 1) / (2.0 * smax)
     inv_n2_step = 1.0 / n2_step
     for t in range(n):
+        if not math.isnan(x_force[t]):
+            x = x_force[t]
         # 1. sensor
         y = s2 if lag else s0
         y = y + k[K_NOISE] * noise[t]
@@ -347,7 +351,7 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
 
 
 @numba.njit(cache=True)
-def simulate_batch(cs, ks, lvs, tables, use_table, lengths, demand, n2s, noise, i_open, x0,
+def simulate_batch(cs, ks, lvs, tables, use_table, lengths, demand, n2s, noise, i_open, x_force, x0,
                    out_i, out_y, out_x, out_v, status):
     """Simulate a batch of flights (leading axis = flight); see :func:`simulate_one`."""
     n2_lo = TABLE_N2[0]
@@ -355,5 +359,5 @@ def simulate_batch(cs, ks, lvs, tables, use_table, lengths, demand, n2s, noise, 
     n2_step = TABLE_N2[1] - TABLE_N2[0]
     for b in range(cs.shape[0]):
         status[b] = simulate_one(cs[b], ks[b], lvs[b], tables[b], use_table[b], n2_lo, n2_step, n2_hi,
-                                 demand[b], n2s[b], noise[b], i_open[b], lengths[b], x0[b],
+                                 demand[b], n2s[b], noise[b], i_open[b], x_force[b], lengths[b], x0[b],
                                  out_i[b], out_y[b], out_x[b], out_v[b])

@@ -37,6 +37,10 @@ class FlightInputs:
         If given, the current is imposed (velocity-gain sweep) and the controller is bypassed [A].
     end_stops : bool, default=True
         If False the rod is not limited by its stroke (virtual test bench for sweeps).
+    forced_position_m : ndarray (n,) or None, default=None
+        If given, the rod position is reset to these values [m] at the start of each
+        frame (NaN entries: free). Used to replay measured flights: with the measured
+        current imposed too, each frame's simulated motion starts from the measured state.
     extras : dict, default={}
         Extra channels to carry to the flight table (e.g. ``fuel_temp_degC``, ``phase``).
     """
@@ -46,6 +50,7 @@ class FlightInputs:
     frame_s: float
     open_loop_current_a: np.ndarray | None = None
     end_stops: bool = True
+    forced_position_m: np.ndarray | None = None
     extras: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -56,6 +61,8 @@ class FlightInputs:
             raise range_error("FlightInputs.n2_frac", f"of length {n} (as demand_m)", len(self.n2_frac))
         if self.open_loop_current_a is not None and len(self.open_loop_current_a) != n:
             raise range_error("FlightInputs.open_loop_current_a", f"of length {n}", len(self.open_loop_current_a))
+        if self.forced_position_m is not None and len(self.forced_position_m) != n:
+            raise range_error("FlightInputs.forced_position_m", f"of length {n}", len(self.forced_position_m))
         if not (self.frame_s > 0):
             raise range_error("FlightInputs.frame_s", "> 0", self.frame_s)
 
@@ -143,6 +150,7 @@ def simulate(models: Sequence, inputs: Sequence[FlightInputs], rngs: Sequence[np
     n2s = np.zeros((nb, n_max))
     noise = np.zeros((nb, n_max))
     i_open = np.full((nb, n_max), np.nan)
+    x_force = np.full((nb, n_max), np.nan)
     x0 = np.zeros(nb)
     lengths = np.zeros(nb, dtype=np.int64)
     for b, (model, inp, rng) in enumerate(zip(models, inputs, rngs)):
@@ -159,7 +167,11 @@ def simulate(models: Sequence, inputs: Sequence[FlightInputs], rngs: Sequence[np
         noise[b, :n] = rng.standard_normal(n)
         if inp.open_loop_current_a is not None:
             i_open[b, :n] = inp.open_loop_current_a
+        if inp.forced_position_m is not None:
+            x_force[b, :n] = inp.forced_position_m
         x0[b] = float(inp.demand_m[0]) if inp.end_stops else 0.0
+        if inp.forced_position_m is not None and np.isfinite(inp.forced_position_m[0]):
+            x0[b] = float(inp.forced_position_m[0])
         use[b] = use_table and k[kernel.K_DIRECT] == 0.0
         tables.append(velocity_table(c, k) if use[b] else None)
     shape = next((t.shape for t in tables if t is not None), (2, 2))
@@ -172,7 +184,7 @@ def simulate(models: Sequence, inputs: Sequence[FlightInputs], rngs: Sequence[np
     out_x = np.zeros((nb, n_max))
     out_v = np.zeros((nb, n_max))
     status = np.zeros(nb, dtype=np.int64)
-    kernel.simulate_batch(cs, ks, lvs, tab, use, lengths, demand, n2s, noise, i_open, x0,
+    kernel.simulate_batch(cs, ks, lvs, tab, use, lengths, demand, n2s, noise, i_open, x_force, x0,
                           out_i, out_y, out_x, out_v, status)
     results = []
     for b in range(nb):
