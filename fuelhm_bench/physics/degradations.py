@@ -11,13 +11,21 @@ mode                       parameter                       law              heal
 ``null_bias_drift``        ``null_bias_drift_a``           additive         + 1.6 mA f (20 % of the 8 mA rated current)
 ``backlash``               ``feedback_backlash_m``         additive         + 30 um f
 ``spool_friction``         ``spool_friction_n``            additive         + 9 N f: 1 -> 10 N
-``radial_clearance``       ``radial_clearance_m``          additive         + 23 um f: h_eff 7 -> 30 um
+``radial_clearance``       ``corner_radius_m``             additive         + 23 um f: h_eff 7 -> 30 um, underlap 23 um
 ``internal_leakage``       ``leakage_coefficient_m3_s_pa`` additive         + 1e-11 m^3/(s Pa) f
 ``diaphragm_clogging``     ``diaphragm_open_fraction``     multiplicative   x (1 - f): 1 -> 0
 =========================  ==============================  ===============  ========================================
 
 Notes
 -----
+Radial clearance: the paper models it as a decrease of the restriction
+coefficient at the abraded corners of the spool lands. Abrasion rounds the
+corners: the rounded edge both leaks more (leakage height ``h = clearance +
+corner radius``) and starts metering before the geometric edge (effective lap
+``u = lap - corner radius``), which is the "equivalent underlap" of PHYSICS.md.
+Raising the leakage height alone barely changes the curve, because the
+softplus opening keeps the null flow gain constant.
+
 The paper says the drift of the null bias is modelled by adding the opposite of
 the drift to the control current; adding ``dInb`` to the valve's null bias is
 the same equation (``i_eff = i - Inb0 - dInb``). Its sign is fixed positive here so
@@ -79,8 +87,9 @@ LAWS: dict[str, DegradationLaw] = {law.mode: law for law in (
                    "Feedback-spring wear: play of the feedback point + 30 um at f = 1."),
     DegradationLaw("spool_friction", "servovalve", "spool_friction_n", "additive", 9.0,
                    "Spool/sleeve friction: Coulomb force + 9 N at f = 1 (1 -> 10 N)."),
-    DegradationLaw("radial_clearance", "servovalve", "radial_clearance_m", "additive", 23e-6,
-                   "Abrasion of the spool lands: leakage height + 23 um at f = 1 (7 -> 30 um)."),
+    DegradationLaw("radial_clearance", "servovalve", "corner_radius_m", "additive", 23e-6,
+                   "Abrasion of the spool-land corners: corner radius + 23 um at f = 1, so the leakage "
+                   "height grows 7 -> 30 um and the rounded edges open 23 um early (equivalent underlap)."),
     DegradationLaw("internal_leakage", "cylinder", "leakage_coefficient_m3_s_pa", "additive", 1e-11,
                    "Cylinder seal wear: laminar leakage coefficient + 1e-11 m^3/(s Pa) at f = 1."),
     DegradationLaw("diaphragm_clogging", "cylinder", "diaphragm_open_fraction", "multiplicative", -1.0,

@@ -76,7 +76,7 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     c[cyl.C_O_B] = max(sv.transition_end * sv.spool_stroke_m, c[cyl.C_O_A] + 1e-9)
     c[cyl.C_H] = sv.leakage_height_m
     overlap = model.effect("spool_overlap")
-    c[cyl.C_LAP] = sv.lap_m + (overlap.overlap_m if overlap else 0.0)
+    c[cyl.C_LAP] = sv.effective_lap_m + (overlap.overlap_m if overlap else 0.0)
     c[cyl.C_CDV] = sv.discharge_coefficient * fl.flow_constant
     c[cyl.C_ALPHA] = sv.filter_flow_factor
     c[cyl.C_A1] = cy.head_area_m2

@@ -21,7 +21,8 @@ in the play, then an exponential once engaged), see :func:`spool_advance`.
 
 Second stage. Four metering edges P->A, A->T, P->B, B->T with openings
 ``o = +/-x_s - u`` (lap ``u``, nominal 0). Radial clearance and corner rounding
-``h = clearance + corner radius`` make every edge leak near null through an
+``h = clearance + corner radius`` make every edge leak near null, and a rounded
+corner starts metering early, so the effective lap is ``u - corner radius`` through an
 effective opening ``o_eff = h * softplus(o / h)`` (0.69 h at null; the slopes of
 the opening and closing edge sum to one, so the null gain stays finite). The
 slot is dual-gain: width ``w_null`` near null, widening linearly to ``w_out``
@@ -137,6 +138,11 @@ class ServovalveParams:
     def leakage_height_m(self) -> float:
         """Effective leakage height h = radial clearance + corner radius [m]."""
         return self.radial_clearance_m + self.corner_radius_m
+
+    @property
+    def effective_lap_m(self) -> float:
+        """Effective lap of the metering edges: lap - corner radius [m] (negative: underlap)."""
+        return self.lap_m - self.corner_radius_m
 
     @property
     def total_null_bias_a(self) -> float:
