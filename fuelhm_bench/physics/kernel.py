@@ -344,8 +344,9 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
         du = (x_new - x) / T
         n0 = lv[0, 0] * s0 + lv[0, 1] * s1 + lv[0, 2] * s2 + lv[0, 3] * x + lv[0, 4] * du
         n1 = lv[1, 0] * s0 + lv[1, 1] * s1 + lv[1, 2] * s2 + lv[1, 3] * x + lv[1, 4] * du
-        n2f = lv[2, 0] * s0 + lv[2, 1] * s1 + lv[2, 2] * s2 + lv[2, 3] * x + lv[2, 4] * du
-        s0, s1, s2 = n0, n1, n2f
+        if lag:
+            s2 = lv[2, 0] * s0 + lv[2, 1] * s1 + lv[2, 2] * s2 + lv[2, 3] * x + lv[2, 4] * du
+        s0, s1 = n0, n1
         x = x_new
     return STATUS_OK
 

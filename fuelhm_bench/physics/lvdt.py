@@ -10,6 +10,7 @@ matrix exponential of the augmented system. Each frame the measured position is
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -81,6 +82,19 @@ def lvdt_state_matrix(lvdt: LvdtParams, lag_time_constant_s: float) -> tuple[np.
     return a, b
 
 
+@functools.lru_cache(maxsize=1024)
+def _discretization_cached(lvdt: LvdtParams, lag_time_constant_s: float, frame_s: float) -> np.ndarray:
+    a, b = lvdt_state_matrix(lvdt, lag_time_constant_s)
+    aug = np.zeros((5, 5))
+    aug[:3, :3] = a
+    aug[:3, 3] = b
+    aug[3, 4] = 1.0
+    e = expm(aug * frame_s)
+    out = np.ascontiguousarray(e[:3, :])
+    out.flags.writeable = False
+    return out
+
+
 def lvdt_discretization(lvdt: LvdtParams, lag_time_constant_s: float, frame_s: float) -> np.ndarray:
     """Exact first-order-hold discretisation of the LVDT filter over one frame.
 
@@ -89,11 +103,6 @@ def lvdt_discretization(lvdt: LvdtParams, lag_time_constant_s: float, frame_s: f
     ndarray of shape (3, 5)
         ``[E_s | E_u | E_du]`` such that ``s_next = E_s @ s + E_u * x0 + E_du * (x1 - x0) / frame_s``
         where ``x0, x1`` are the true positions at the start and end of the frame [m].
+        Memoised (the parameter sets are immutable); the returned array is read-only.
     """
-    a, b = lvdt_state_matrix(lvdt, lag_time_constant_s)
-    aug = np.zeros((5, 5))
-    aug[:3, :3] = a
-    aug[:3, 3] = b
-    aug[3, 4] = 1.0
-    e = expm(aug * frame_s)
-    return np.ascontiguousarray(e[:3, :])
+    return _discretization_cached(lvdt, float(lag_time_constant_s), float(frame_s))

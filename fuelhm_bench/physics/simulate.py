@@ -193,6 +193,5 @@ def simulate(models: Sequence, inputs: Sequence[FlightInputs], rngs: Sequence[np
             raise NumericalError(f"The simulator produced a non-finite value for {name}; "
                                  f"check its parameters (model: {models[b]!r:.200}).")
         n = lengths[b]
-        results.append(SimOutput(inputs[b].time_s, out_i[b, :n].copy(), out_y[b, :n].copy(),
-                                 out_x[b, :n].copy(), out_v[b, :n].copy()))
+        results.append(SimOutput(inputs[b].time_s, out_i[b, :n], out_y[b, :n], out_x[b, :n], out_v[b, :n]))
     return results
