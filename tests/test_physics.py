@@ -110,8 +110,8 @@ def test_several_modes_act_at_once(healthy):
     assert f["v_max"] < 0.6 * _curve_features(healthy)["v_max"]
 
 
-def _short_flight(model, seed=0, minutes=2.5):
-    mp = MissionProfile(duration_s=minutes * 60.0, start_duration_s=30.0, frame_s=model.controller.frame_s)
+def _short_flight(model, seed=0, minutes=3.0):
+    mp = MissionProfile(duration_s=minutes * 60.0, start_duration_s=60.0, frame_s=model.controller.frame_s)
     inp = mp.sample(np.random.default_rng(seed))
     return inp, simulate([model], [inp], [np.random.default_rng(seed + 1)])[0]
 

@@ -14,8 +14,8 @@ def register(sub) -> None:
                                    "open loop, on a virtual bench without end stops, and write the result in the "
                                    "DATA.md format (one flight; the rod position is the true one of the virtual "
                                    "bench, and the true velocity is in an extra 'velocity_true_mm_s' column).")
-    p.add_argument("--min-ma", type=float, default=-10.0, help="lowest current [mA] (default -10)")
-    p.add_argument("--max-ma", type=float, default=10.0, help="highest current [mA] (default 10)")
+    p.add_argument("--min-ma", type=float, default=-12.0, help="lowest current [mA] (default -12)")
+    p.add_argument("--max-ma", type=float, default=12.0, help="highest current [mA] (default 12)")
     p.add_argument("--ramp-seconds", type=positive_float, default=60.0, help="duration of each one-way ramp [s]")
     p.add_argument("--cycles", type=positive_int, default=1, help="up-and-down cycles (default 1)")
     p.add_argument("--n2-pct", type=positive_float, default=82.0, help="engine speed, sets supply pressure [%%]")

@@ -1,7 +1,9 @@
 """Mission profile: engine speed, position demand, temperature and phases of a flight.
 
-A flight is: engine start (N2 spools up to ground idle, then the FADEC strokes
-the actuator end to end: the *test sweep*), taxi, take-off, climb, cruise,
+A flight is: engine start (recording starts at ground idle; the FADEC then
+strokes the actuator end to end with demand ramps at increasing rates, the
+*test sweep*, the fastest ramp faster than the actuator can follow so that the
+current sweeps through the velocity saturation), taxi, take-off, climb, cruise,
 descent, approach, landing (with reverse thrust) and taxi-in. N2 follows each
 phase's set point through a first-order engine lag, with random throttle steps
 (operating variability). The variable-geometry demand is scheduled on N2
@@ -49,6 +51,9 @@ class MissionProfile:
         Engine start including the actuator test sweep [s].
     test_sweep : bool, default=True
         Whether the FADEC strokes the actuator end to end during engine start.
+    sweep_rates_m_s : tuple of float, default=(0.008, 0.015, 0.03, 0.05, 0.07, 0.09, 0.11)
+        Demand ramp rates of the test sweep [m/s], each ramp up then down; the sweep is
+        cut short if it does not fit in ``start_duration_s``.
     sweep_low_m, sweep_high_m : float, default=0.003, 0.057
         Demand extremes of the test sweep and of the N2 schedule [m].
     schedule_n2_low, schedule_n2_high : float, default=0.55, 1.0
@@ -69,6 +74,7 @@ class MissionProfile:
     frame_s: float = 0.01
     start_duration_s: float = 60.0
     test_sweep: bool = True
+    sweep_rates_m_s: tuple = (0.008, 0.015, 0.03, 0.05, 0.07, 0.09, 0.11)
     sweep_low_m: float = 0.003
     sweep_high_m: float = 0.057
     schedule_n2_low: float = 0.55
@@ -99,6 +105,10 @@ class MissionProfile:
         if self.duration_s < self.start_duration_s + 60.0:
             raise range_error("MissionProfile.duration_s", f">= start_duration_s + 60 ({self.start_duration_s + 60:g} s)",
                               self.duration_s)
+        rates = self.sweep_rates_m_s
+        if not isinstance(rates, tuple) or not rates or not all(
+                isinstance(r, (int, float)) and 0.0 < r <= 1.0 for r in rates):
+            raise range_error("MissionProfile.sweep_rates_m_s", "a non-empty tuple of rates in (0, 1] m/s", rates)
         if self.sweep_high_m <= self.sweep_low_m:
             raise range_error("MissionProfile.sweep_high_m", f"> sweep_low_m ({self.sweep_low_m:g})", self.sweep_high_m)
         if self.schedule_n2_high <= self.schedule_n2_low:
@@ -114,6 +124,20 @@ class MissionProfile:
         """Scheduled position demand [m] for engine speed ``n2`` [-]."""
         frac = np.clip((n2 - self.schedule_n2_low) / (self.schedule_n2_high - self.schedule_n2_low), 0.0, 1.0)
         return self.sweep_low_m + frac * (self.sweep_high_m - self.sweep_low_m)
+
+    def _test_sweep(self, n_start: int) -> np.ndarray:
+        """Demand [m] of the engine-start test sweep: ramps up and down at each rate, then hold."""
+        T = self.frame_s
+        lo, hi = self.sweep_low_m, self.sweep_high_m
+        parts = [np.full(int(2.0 / T), lo)]
+        for rate in self.sweep_rates_m_s:
+            m = max(int(round((hi - lo) / rate / T)), 1)
+            ramp = np.linspace(lo, hi, m + 1)[1:]
+            parts += [ramp, np.full(int(1.0 / T), hi), ramp[::-1], np.full(int(1.0 / T), lo)]
+        seq = np.concatenate(parts)
+        out = np.full(n_start, lo)
+        out[: min(n_start, seq.size)] = seq[:n_start]
+        return out
 
     def sample(self, rng: np.random.Generator) -> FlightInputs:
         """Draw one flight's inputs.
@@ -156,25 +180,15 @@ class MissionProfile:
         # Reverse thrust burst at landing.
         land = bounds[PHASE_NAMES.index("landing") - 1]
         target[land + int(3 / T): land + int(15 / T)] = 0.85
-        # Engine start: spool-up from 0 over the first 40 % of the start.
-        n_spool = int(0.4 * n_start)
-        target[:n_spool] = idle * np.linspace(0.0, 1.0, max(n_spool, 1)) ** 0.5
         # First-order engine lag (exact discrete update), then small fluctuations.
         a = np.exp(-T / self.engine_time_constant_s)
         from scipy.signal import lfilter
 
         n2 = lfilter([1 - a], [1, -a], target, zi=[a * target[0]])[0]
-        n2[:n_spool] = target[:n_spool]
         n2 = np.clip(n2 + rng.normal(0.0, self.n2_noise_std, n) * (t >= self.start_duration_s), 0.0, 1.15)
         demand = self.demand_from_n2(n2)
         if self.test_sweep and n_start > 0:
-            # End-to-end stroke at ground idle: low, high, low, then the schedule.
-            lo, hi = self.sweep_low_m, self.sweep_high_m
-            seg = np.array([0.4, 0.55, 0.7, 0.85]) * n_start
-            i0, i1, i2, i3 = seg.astype(int)
-            demand[i0:i1] = hi
-            demand[i1:i2] = lo
-            demand[i2:i3] = 0.5 * (lo + hi)
+            demand[:n_start] = self._test_sweep(n_start)
         temp0 = self.fuel_temp_start_degc + rng.normal(0.0, 8.0)
         temp1 = self.fuel_temp_end_degc + rng.normal(0.0, 8.0)
         tau = 0.3 * self.duration_s

@@ -25,7 +25,7 @@ class VelocityGainSweep:
 
     Parameters
     ----------
-    current_min_a, current_max_a : float, default=-10e-3, 10e-3
+    current_min_a, current_max_a : float, default=-12e-3, 12e-3
         Ramp extremes [A].
     ramp_duration_s : float, default=60.0
         Duration of each one-way ramp [s].
@@ -37,8 +37,8 @@ class VelocityGainSweep:
         Number of up-and-down cycles.
     """
 
-    current_min_a: float = -10e-3
-    current_max_a: float = 10e-3
+    current_min_a: float = -12e-3
+    current_max_a: float = 12e-3
     ramp_duration_s: float = 60.0
     n2_frac: float = 0.82
     frame_s: float = 0.01

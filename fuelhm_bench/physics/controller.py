@@ -36,8 +36,9 @@ class ControllerParams:
         Bound of the integrator state [A].
     dead_band_m : float, default=2e-5
         No integration while ``|error|`` is below this [m].
-    current_saturation_a : float, default=10e-3
-        Saturation of the commanded current [A].
+    current_saturation_a : float, default=12e-3
+        Saturation of the commanded current [A]; above the 8 mA rated current so that the
+        velocity saturation (spool at full stroke) is seen with unsaturated current.
     """
 
     frame_s: float = 0.01
@@ -45,7 +46,7 @@ class ControllerParams:
     ki_a_per_m_s: float = 6.0
     integrator_clamp_a: float = 8e-3
     dead_band_m: float = 2e-5
-    current_saturation_a: float = 10e-3
+    current_saturation_a: float = 12e-3
 
     def __post_init__(self) -> None:
         check_fields(self, {

@@ -1,0 +1,92 @@
+"""``fuelhm-bench plot-curve``: draw velocity-gain curves (paper Figs. 4, 5 and 8)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from fuelhm_bench.cli._common import check_output
+from fuelhm_bench.errors import DataFormatError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("plot-curve", help="plot the velocity-gain curve of recorded flights",
+                       description="Draw the in-flight velocity-gain curve (control current vs cylinder "
+                                   "velocity from the differentiated LVDT position): raw points and the "
+                                   "local-mean smoothing (paper Fig. 4); --annotate marks the indicators "
+                                   "(Fig. 5); --overlay adds curves from other files, e.g. under "
+                                   "degradation (Fig. 8).")
+    p.add_argument("flights", help="flight file in the DATA.md format (.parquet, .csv, .csv.gz)")
+    p.add_argument("--flight", action="append", default=None, metavar="ID",
+                   help="flight id to draw (repeatable; default: the first flight of the file)")
+    p.add_argument("--annotate", action="store_true", help="mark the 10 indicators on the curve (Fig. 5)")
+    p.add_argument("--overlay", action="append", default=[], metavar="FILE[=LABEL]",
+                   help="overlay the first flight of another file as a smoothed curve (Fig. 8; repeatable)")
+    p.add_argument("--title", default=None, help="figure title")
+    p.add_argument("--force", action="store_true", help="overwrite the output file")
+    p.add_argument("--out", required=True, help="output image (.png, .pdf or .svg)")
+    p.set_defaults(func=run)
+
+
+def _select(flights, wanted, source):
+    if not flights:
+        raise DataFormatError(f"{source}: no usable flight (all were rejected).")
+    if not wanted:
+        return [flights[0]]
+    by_id = {str(f.flight_id): f for f in flights}
+    chosen = []
+    for w in wanted:
+        if w not in by_id:
+            shown = ", ".join(list(by_id)[:10])
+            raise DataFormatError(f"{source}: no usable flight with id '{w}'. Available: {shown}"
+                                  f"{', ...' if len(by_id) > 10 else ''}.")
+        chosen.append(by_id[w])
+    return chosen
+
+
+def _load(path):
+    from fuelhm_bench.io import read_flights, split_flights
+
+    flights, rejected = split_flights(read_flights(path), source=str(path), min_current_range_ma=0.0)
+    for r in rejected:
+        print(f"warning: {r}", file=sys.stderr)
+    return flights
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from fuelhm_bench.indicators import extract_indicators, velocity_gain_curve, velocity_points
+    from fuelhm_bench.indicators.plot import velocity_gain_figure
+
+    out = check_output(args.out, force=args.force)
+    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise DataFormatError(f"--out {out}: the image format must be .png, .pdf or .svg.")
+    chosen = _select(_load(args.flights), args.flight, args.flights)
+    curves, labels, inds = [], [], []
+    pts_i, pts_v = [], []
+    for f in chosen:
+        i, v = velocity_points(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id)
+        pts_i.append(i)
+        pts_v.append(v)
+        curves.append(velocity_gain_curve(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id))
+        labels.append(f"flight {f.flight_id}")
+        inds.append(extract_indicators(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id)
+                    if args.annotate else None)
+    for spec in args.overlay:
+        path, _, label = spec.partition("=")
+        f = _select(_load(path), None, path)[0]
+        curves.append(velocity_gain_curve(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id))
+        labels.append(label or path)
+        inds.append(extract_indicators(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id)
+                    if args.annotate else None)
+    current = np.concatenate(pts_i)
+    velocity = np.concatenate(pts_v)
+    if len(curves) == 1:
+        fig = velocity_gain_figure(current, velocity, curves[0], inds[0], labels=labels, title=args.title)
+    else:
+        fig = velocity_gain_figure(current, velocity, curves, inds if args.annotate else None, labels=labels,
+                                   title=args.title)
+    fig.savefig(out, dpi=130)
+    print(f"wrote {out} ({len(curves)} curve{'s' if len(curves) > 1 else ''}, {current.size} raw points)")
+    return 0
