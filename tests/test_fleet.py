@@ -1,0 +1,82 @@
+"""Fleets: schedules, growth laws, streaming with bounded memory."""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.flights.fleet import FleetConfig, build_units, iter_flights
+from fuelhm_bench.flights.mission import MissionProfile
+from fuelhm_bench.flights.schedule import ModeSchedule, draw_unit_schedule
+
+SHORT = MissionProfile(duration_s=120.0, start_duration_s=40.0)
+
+
+@pytest.mark.parametrize("growth, expected", [
+    ("step", [0, 0, 0.8, 0.8, 0.8, 0.8]),
+    ("linear", [0, 0, 0.2, 0.4, 0.6, 0.8]),
+])
+def test_growth_laws(growth, expected):
+    s = ModeSchedule("backlash", onset_min=2, onset_max=2, growth=growth, ramp_flights=4, max_intensity=0.8)
+    assert np.allclose(s.intensity(np.arange(6), 2), expected)
+
+
+def test_exponential_growth_is_incipient_then_reaches_max():
+    s = ModeSchedule("backlash", growth="exponential", ramp_flights=10, max_intensity=1.0)
+    f = s.intensity(np.arange(12), 0)
+    assert f[0] < 0.05 and np.all(np.diff(f) >= 0) and f[9] == pytest.approx(1.0) and f[11] == 1.0
+
+
+def test_onset_drawn_in_range_and_seeded():
+    sched = [ModeSchedule("internal_leakage", onset_min=3, onset_max=7)]
+    onsets = [draw_unit_schedule(sched, np.random.default_rng(s)).onsets[0] for s in range(200)]
+    assert min(onsets) == 3 and max(onsets) == 7
+    again = [draw_unit_schedule(sched, np.random.default_rng(s)).onsets[0] for s in range(200)]
+    assert onsets == again
+
+
+def test_exclusive_modes_and_probabilities():
+    sched = [ModeSchedule("internal_leakage", probability=0.3), ModeSchedule("backlash", probability=0.3)]
+    drawn = [draw_unit_schedule(sched, np.random.default_rng(s), simultaneous=False) for s in range(2000)]
+    n_modes = np.array([len(u.schedules) for u in drawn])
+    assert n_modes.max() == 1
+    assert 0.35 < np.mean(n_modes == 0) < 0.45
+    with pytest.raises(ParameterError, match="summing to <= 1"):
+        draw_unit_schedule([ModeSchedule("backlash", probability=0.7)] * 2, np.random.default_rng(0), simultaneous=False)
+
+
+def test_schedule_validation():
+    with pytest.raises(ParameterError, match="onset_max"):
+        ModeSchedule("backlash", onset_min=4, onset_max=2)
+    with pytest.raises(ParameterError, match="growth"):
+        ModeSchedule("backlash", growth="quadratic")
+    with pytest.raises(ParameterError, match="max_intensity"):
+        ModeSchedule("backlash", max_intensity=0.0)
+
+
+def test_units_are_reproducible_and_independent_of_fleet_size():
+    a = build_units(FleetConfig(n_units=3, mission=SHORT, seed=5))
+    b = build_units(FleetConfig(n_units=5, mission=SHORT, seed=5))
+    assert [u.model for u in a] == [u.model for u in b[:3]]
+
+
+def _peak_bytes(n_flights: int) -> int:
+    config = FleetConfig(n_units=2, n_flights=n_flights, mission=SHORT, seed=1)
+    for _ in iter_flights(config, batch_size=2):  # warm up (compilation, tables)
+        break
+    tracemalloc.start()
+    done = 0
+    for batch in iter_flights(config, batch_size=2):
+        done += len(batch)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert done == 2 * n_flights
+    return peak
+
+
+def test_fleet_streaming_memory_does_not_grow_with_flights():
+    small, large = _peak_bytes(2), _peak_bytes(8)
+    assert large < 1.25 * small, (small, large)
