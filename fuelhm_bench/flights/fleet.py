@@ -99,6 +99,13 @@ class SimulatedFlight:
     inputs: FlightInputs
     output: SimOutput
 
+    def as_flight_arrays(self):
+        """The recorded signals at the data boundary (mA, mm), as :class:`~fuelhm_bench.io.FlightArrays`."""
+        from fuelhm_bench.io import FlightArrays
+
+        return FlightArrays(self.flight_id, self.unit_id, self.output.time_s, self.output.current_a * 1e3,
+                            self.output.measured_position_m * 1e3)
+
 
 def build_units(config: FleetConfig) -> list[Unit]:
     """Manufacture the units and draw their degradation schedules."""
