@@ -1,0 +1,83 @@
+"""Design of experiments, published knowledge and the indicators / itl commands on simulated data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fuelhm_bench.cli import main
+from fuelhm_bench.diagnosis.doe import DesignOfExperiments, run_doe
+from fuelhm_bench.flights.mission import MissionProfile
+from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+SHORT = MissionProfile(duration_s=300.0)
+
+
+@pytest.fixture(scope="module")
+def doe_table():
+    return run_doe(DesignOfExperiments(n_units=2, intensities=(0.5, 1.0), mission=SHORT,
+                                       modes=("null_bias_drift", "internal_leakage", "diaphragm_clogging")))
+
+
+def test_doe_pairs_every_case_per_unit(doe_table):
+    assert len(doe_table) == 2 * (1 + 3 * 2)
+    assert set(doe_table["mode"]) == {"healthy", "null_bias_drift", "internal_leakage", "diaphragm_clogging"}
+    assert set(INDICATOR_NAMES) <= set(doe_table.columns)
+
+
+def test_null_bias_drift_signature_pattern(doe_table):
+    """PHYSICS.md section 4: null-bias drift moves X1, X2, Inb, I0 together by ~ +1.6 mA at f = 1."""
+    from fuelhm_bench.diagnosis.itl import fit_itl
+
+    a = fit_itl(doe_table).matrix("A")
+    for name in ("X1", "X2", "Inb", "I0"):
+        assert a.loc["null_bias_drift", name] == pytest.approx(1.6, abs=0.35), name
+    for name in ("Y1", "Y2", "G_out"):
+        assert abs(a.loc["null_bias_drift", name]) < 0.25 * abs(a.loc["null_bias_drift", "Inb"]) * 10
+
+
+def test_leakage_and_clogging_move_idle_current_oppositely(doe_table):
+    from fuelhm_bench.diagnosis.itl import fit_itl
+
+    a = fit_itl(doe_table).matrix("A")
+    assert a.loc["internal_leakage", "I0"] < -0.3      # the valve must feed the leak: I0 moves away from Inb
+    assert a.loc["diaphragm_clogging", "I0"] > 0.1     # less cooling flow: |I0 - Inb| shrinks
+
+
+def test_indicators_command_on_simulated_and_hand_made_csv(tmp_path, capsys):
+    flights = tmp_path / "f.parquet"
+    assert main(["simulate", "--units", "1", "--flights", "2", "--minutes", "3", "--out", str(flights)]) == 0
+    out = tmp_path / "ind.csv"
+    assert main(["indicators", str(flights), "--out", str(out)]) == 0
+    table = pd.read_csv(out)
+    assert list(table["flight_id"]) == [0, 1] and "unit_id" in table
+    assert table[list(INDICATOR_NAMES)].notna().all().all()
+    # A hand-made CSV in the DATA.md format (no unit_id, string flight ids) with one bad flight.
+    f = pd.read_parquet(flights)
+    hand = f[f.flight_id == 0][["time_s", "current_mA", "position_mm"]].copy()
+    hand.insert(0, "flight_id", "A")
+    bad = hand.iloc[:50].copy()
+    bad["flight_id"] = "B"
+    bad["current_mA"] = 1.0  # constant current: no excitation
+    csv = tmp_path / "hand.csv"
+    pd.concat([hand, bad]).to_csv(csv, index=False)
+    out2 = tmp_path / "ind2.csv"
+    assert main(["indicators", str(csv), "--out", str(out2)]) == 0
+    t2 = pd.read_csv(out2, keep_default_na=False)
+    assert list(t2["flight_id"]) == ["A", "B"]
+    assert t2.loc[1, "quality_reason"].startswith("rejected:") and "B" in capsys.readouterr().err
+
+
+def test_itl_command_writes_laws_and_signatures(tmp_path):
+    out = tmp_path / "itl"
+    assert main(["itl", "--units", "1", "--intensities", "1", "--minutes", "5", "--healthy-units", "4",
+                 "--healthy-flights", "3", "--out", str(out)]) == 0
+    itl = pd.read_csv(out / "itl.csv")
+    assert len(itl) == 70 and list(itl.columns) == ["mode", "indicator", "A", "r2", "residual_std", "n"]
+    sig = pd.read_csv(out / "signatures.csv", index_col="mode")
+    assert sig.shape == (7, 10)
+    assert abs(sig.loc["null_bias_drift", "Inb"]) > 3 * abs(sig.loc["null_bias_drift", "Y1"])
+    assert (out / "signatures.png").stat().st_size > 5000 and (out / "itl.png").exists()
+    assert "| mode |" in (out / "signatures.md").read_text()
+    assert np.isfinite(sig.loc["null_bias_drift"].to_numpy()).all()
