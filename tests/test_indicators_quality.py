@@ -185,12 +185,12 @@ def test_curve_construction_errors():
 
 
 def test_slope_change_pinned_on_its_search_limit_is_not_reported():
-    # X2 only 0.7 mA above I0: the fit may not go closer than min_null_halfwidth_ma (1 mA), so
+    # X2 only 0.7 mA above I0: with min_null_halfwidth_ma = 1 mA the fit may not go closer, so
     # its optimum sits on that limit and drags the other parameters (here X1 by ~0.2 mA):
     # every curve indicator is flagged rather than reported.
     curve = DualGainCurve(null_halfwidth_ma=1.2, idle_offset_ma=0.5)
     flight = synthetic_flight(curve, n_excursions=300, seed=38)
-    result = extract(flight)
+    result = extract(flight, ExtractionConfig(min_null_halfwidth_ma=1.0))
     assert_consistent(result)
     curve_names = ("X1", "Y1", "X2", "Y2", "Inb", "G_in", "G_out", "G_null")
     assert not any(result.valid[n] for n in curve_names)
@@ -217,5 +217,6 @@ def test_imprecisely_located_slope_change_is_not_reported():
     assert any(re.search(r"X2, Y2, G_out: slope change located only within .*\(95% profile "
                          r"interval [\d.]+ mA wide\), need <= 0.4 mA", r)
                for r in result.reasons), result.reasons
-    lax = extract(flight, ExtractionConfig.for_frame_rate(50.0, max_breakpoint_interval_ma=5.0))
+    lax = extract(flight, ExtractionConfig.for_frame_rate(50.0, max_breakpoint_interval_ma=5.0,
+                                                          min_null_halfwidth_ma=1.0))
     assert lax.valid["X2"] and abs(lax.values["X2"] - curve.x2) > 0.4  # what it would report

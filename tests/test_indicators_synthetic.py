@@ -18,7 +18,8 @@ sampling are 15-85 % of them):
 * G_in, G_out, G_null: 3 % (the same rounding; 11-12.5 mm/s/mA segments lose ~1 %).
 * I0: 0.005 mA (the idle current is ~2500 random levels of std 0.05 mA: their mean is known
   to ~1e-3 mA; the few transient samples slower than 0.5 mm/s near I0 bias it less).
-* Hys0: 5 % (sampling error ~1.5 %, plus the transient samples counted as idle).
+* Hys0: 6 % (sampling error ~1.5 % at 1 sigma, plus a bias of up to -3.5 % from the transient
+  samples counted as idle, seen with irregular time stamps).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from fuelhm_bench.indicators.synthetic import DualGainCurve, synthetic_flight
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
 
 ABS_TOL = {"X1": 0.05, "X2": 0.05, "Inb": 0.03, "Y1": 0.5, "Y2": 0.5, "I0": 0.005}
-REL_TOL = {"G_in": 0.03, "G_out": 0.03, "G_null": 0.03, "Hys0": 0.05}
+REL_TOL = {"G_in": 0.03, "G_out": 0.03, "G_null": 0.03, "Hys0": 0.06}
 
 
 def assert_recovered(result, truth):
@@ -112,8 +113,11 @@ def test_ignoring_time_stamps_would_be_wrong():
 
 
 def test_end_stops_and_current_saturation_are_masked():
-    flight = synthetic_flight(n_excursions=300, saturation_events=25, seed=2)
-    curve = velocity_gain_curve(flight.time_s, flight.current_ma, flight.position_mm)
+    # A controller limited at +/-10 mA (inside the bin range, so that unmasked points would land
+    # in bins), with the extraction told so.
+    flight = synthetic_flight(n_excursions=300, saturation_events=25, seed=2, current_limit_ma=10.0)
+    config = ExtractionConfig(current_limits_ma=(-10.0, 10.0))
+    curve = velocity_gain_curve(flight.time_s, flight.current_ma, flight.position_mm, config)
     assert curve.counter("n_end_stop") > 1000
     assert curve.counter("n_current_limit") > 100
     # No spurious (I_sat, v=0) point survives: the bins at the current limits are empty.

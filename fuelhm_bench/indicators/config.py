@@ -86,7 +86,7 @@ class ExtractionConfig:
     end_stop_margin_mm : float, default=0.5
         A sample is masked if any position in its differentiator window is within this margin
         of an end stop (``x <= low + margin`` or ``x >= high - margin``), in mm.
-    current_limits_ma : tuple of float or None, default=(-10.0, 10.0)
+    current_limits_ma : tuple of float or None, default=(-12.0, 12.0)
         Saturation limits of the controller's current, in mA. ``None`` means "use the observed
         minimum and maximum current of the flight" (batch extraction only).
     current_limit_margin_ma : float, default=0.05
@@ -126,9 +126,12 @@ class ExtractionConfig:
         Minimum relative slope change ``|G_a - G_b| / max(|G_a|, |G_b|)`` at a slope change for
         its coordinates (X, Y) to be valid. Without it, a flight that never reaches X2 would
         place a spurious breakpoint inside the null region.
-    min_null_halfwidth_ma : float, default=1.0
+    min_null_halfwidth_ma : float, default=0.25
         The fit keeps both slope changes at least this far from the idle current ``I0``, in
-        mA (``X1 <= I0 - w``, ``X2 >= I0 + w``; the nominal null half-width is ~2 mA).
+        mA (``X1 <= I0 - w``, ``X2 >= I0 + w``; the nominal null half-width is ~2 mA). The null
+        region is centred on the null bias, not on I0: internal leakage and filter contamination
+        move I0 to within ~0.5 mA of a slope change at full intensity, so the margin must stay
+        well below that (with 1 mA those flights lost all eight curve indicators).
     max_breakpoint_interval_ma : float, default=0.4
         Largest width of the approximate 95 % profile interval of a slope change (X1, X2) for
         it to count as identified, in mA (dense flights give a few hundredths; sparse flights
@@ -162,7 +165,7 @@ class ExtractionConfig:
     max_frame_s: float = 0.1
     stroke_limits_mm: tuple[float, float] | None = (0.0, 60.0)
     end_stop_margin_mm: float = 0.5
-    current_limits_ma: tuple[float, float] | None = (-10.0, 10.0)
+    current_limits_ma: tuple[float, float] | None = (-12.0, 12.0)
     current_limit_margin_ma: float = 0.05
     max_current_rate_ma_s: float | None = 100.0
     idle_velocity_mm_s: float = 0.5
@@ -175,7 +178,7 @@ class ExtractionConfig:
     min_segment_bins: int = 10
     min_segment_span_ma: float = 1.5
     min_slope_change: float = 0.1
-    min_null_halfwidth_ma: float = 1.0
+    min_null_halfwidth_ma: float = 0.25
     max_breakpoint_interval_ma: float = 0.4
     coarse_grid_size: int = 24
 

@@ -179,7 +179,7 @@ def synthetic_flight(curve: DualGainCurve | None = None, *, rate_hz: float = 100
                      position_noise_mm: float = 0.003,
                      adc_bits: int = 12, adc_range_mm: tuple[float, float] = (-5.0, 65.0),
                      stroke_mm: tuple[float, float] = (0.0, 60.0),
-                     current_limit_ma: float = 10.0, saturation_events: int = 0,
+                     current_limit_ma: float = 12.0, saturation_events: int = 0,
                      time_jitter_s: float = 0.0, flight_id: object = 0, unit_id: object = None,
                      seed: int = 0) -> SyntheticFlight:
     """Draw a flight whose velocity follows ``curve`` (see the module docstring).
@@ -218,7 +218,7 @@ def synthetic_flight(curve: DualGainCurve | None = None, *, rate_hz: float = 100
         ADC input range, in mm (quantum ``(high - low) / 2**adc_bits``).
     stroke_mm : tuple of float, default=(0.0, 60.0)
         End stops, in mm.
-    current_limit_ma : float, default=10.0
+    current_limit_ma : float, default=12.0
         Controller current limit (saturation events), in mA.
     saturation_events : int, default=0
         Number of excursions replaced by a saturation event: current at ``+/-current_limit_ma``
