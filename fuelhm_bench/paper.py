@@ -50,6 +50,7 @@ class PaperResult:
     knowledge: object
     timings: dict
     sizes: dict
+    mission: object = None
 
 
 def _split_training(train: pd.DataFrame, fraction: float = 0.25) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -63,7 +64,7 @@ def _split_training(train: pd.DataFrame, fraction: float = 0.25) -> tuple[pd.Dat
 def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3, 5), scale: float = 1.0,
               progress: Callable[[int], object] | None = None, on_stage: Callable[[str], object] | None = None
               ) -> PaperResult:
-    """Run the study. ``scale`` < 1 shrinks the test fleet (for quick checks); 1 is the scenario."""
+    """Run the study. ``scale`` < 1 shrinks the scored fleet (for quick checks); 1 is the scenario."""
     from fuelhm_bench.datasets import fleet_indicators
     from fuelhm_bench.evaluation import EvaluationData, run_method
     from fuelhm_bench.knowledge import KnowledgeBuild, build_knowledge
@@ -77,9 +78,8 @@ def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3
     t0 = time.perf_counter()
     train_cfg = sc.training_fleet_config()
     test_cfg = sc.test_fleet_config()
-    if scale != 1.0:
+    if scale != 1.0:  # only the scored fleet shrinks: the healthy model needs the unit-to-unit dispersion
         test_cfg = dataclasses.replace(test_cfg, n_units=max(2, int(round(test_cfg.n_units * scale))))
-        train_cfg = dataclasses.replace(train_cfg, n_units=max(4, int(round(train_cfg.n_units * scale))))
     stage("knowledge: healthy training fleet, design of experiments, ITL, signatures")
     build = KnowledgeBuild.from_scenario(sc, doe_units=doe_units, seed=train_cfg.seed)
     build = dataclasses.replace(build, healthy_fleet=train_cfg)
@@ -118,7 +118,7 @@ def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3
              "calibration_flights": len(cal_part), "doe_flights": len(knowledge.doe_table),
              "test_flights": len(test_ind), "test_units": test_cfg.n_units,
              "flight_minutes": test_cfg.mission.duration_s / 60.0}
-    return PaperResult(table_iv, table_v, table_vi, card, run, knowledge, timings, sizes)
+    return PaperResult(table_iv, table_v, table_vi, card, run, knowledge, timings, sizes, test_cfg.mission)
 
 
 def _table_iv(signatures: pd.DataFrame) -> pd.DataFrame:

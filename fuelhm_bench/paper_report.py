@@ -36,20 +36,18 @@ def _md(df: pd.DataFrame, digits: int = 1) -> str:
 
 
 def _figures(r: PaperResult, out: Path) -> list[Path]:
+    from fuelhm_bench.flights.fleet import FleetConfig, iter_flights
     from fuelhm_bench.flights.sweep import VelocityGainSweep, run_sweep
-    from fuelhm_bench.indicators import extract_indicators, velocity_gain_curve, velocity_points
+    from fuelhm_bench.indicators import ExtractionConfig, extract_indicators, velocity_gain_curve, velocity_points
     from fuelhm_bench.indicators.plot import velocity_gain_figure
+    from fuelhm_bench.physics.model import LoopModel
     from fuelhm_bench.scoring import plot_score_distributions, save_figure
 
     paths = []
-    # Figs. 4 and 5: one healthy in-flight curve, raw and smoothed; then annotated with the indicators.
-    healthy = r.knowledge.healthy_table
-    flight_id = healthy["flight_id"].iloc[0]
-    from fuelhm_bench.flights.fleet import FleetConfig, iter_flights
-
-    cfg = FleetConfig(n_units=1, n_flights=1, mission=r.knowledge.doe_table.attrs.get("mission") or
-                      FleetConfig().mission.__class__(duration_s=r.sizes["flight_minutes"] * 60.0))
-    fl = next(iter_flights(cfg, batch_size=1))[0].as_flight_arrays()
+    # Figs. 4 and 5: one healthy in-flight curve, raw and smoothed; then with the indicators.
+    fleet = FleetConfig(n_units=1, n_flights=1, mission=r.mission) if r.mission is not None else FleetConfig(
+        n_units=1, n_flights=1)
+    fl = next(iter_flights(fleet, batch_size=1))[0].as_flight_arrays()
     i, v = velocity_points(fl.time_s, fl.current_ma, fl.position_mm)
     curve = velocity_gain_curve(fl.time_s, fl.current_ma, fl.position_mm)
     fig = velocity_gain_figure(i, v, curve, None, labels=["local means"],
@@ -58,21 +56,19 @@ def _figures(r: PaperResult, out: Path) -> list[Path]:
     ind = extract_indicators(fl.time_s, fl.current_ma, fl.position_mm)
     fig = velocity_gain_figure(i, v, curve, ind, labels=["local means"], title="Fig. 5 - indicators on the curve")
     paths.append(save_figure(fig, out / "fig5_indicators.png"))
-    # Fig. 8: model sweeps under each degradation at 0, 50 and 100 % intensity.
-    from fuelhm_bench.physics.model import LoopModel
-
+    # Fig. 8: model sweeps (virtual bench, no end stops) under each degradation at 0, 50 and 100 %.
+    bench = ExtractionConfig(stroke_limits_mm=(-1e6, 1e6))
     for mode, name in zip(PAPER_MODES, ("a_drift", "b_leak")):
         curves, labels = [], []
         for f in (0.0, 0.5, 1.0):
             res = run_sweep(LoopModel().degraded({mode: f}), VelocityGainSweep(ramp_duration_s=40.0))
             o = res.output
-            curves.append(velocity_gain_curve(o.time_s, o.current_a * 1e3, o.true_position_m * 1e3))
+            curves.append(velocity_gain_curve(o.time_s, o.current_a * 1e3, o.true_position_m * 1e3, bench))
             labels.append(f"{mode} {f:.0%}")
         fig = velocity_gain_figure(None, None, curves, None, labels=labels, title=f"Fig. 8 - {mode}")
         paths.append(save_figure(fig, out / f"fig8{name}.png"))
     # Fig. 10: global-score distributions with thresholds.
     paths.append(save_figure(plot_score_distributions(r.run, r.scorecard.config), out / "fig10_scores.png"))
-    del flight_id
     return paths
 
 
