@@ -219,3 +219,62 @@ def score_outcome(outcome: MethodOutcome, data: EvaluationData, config=None):
     run = Run(labels=data.test_labels, decisions=outcome.decisions, healthy_scores=outcome.healthy_scores,
               name=outcome.method)
     return score_run(run, config)
+
+
+def scenario_data(scenario, *, seed: int | None = None, doe_units: int = 6, scale: float = 1.0,
+                  progress=None, drifted: bool = True) -> tuple[EvaluationData, object]:
+    """Simulate a scenario's training and test fleets and build the published knowledge.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        A shipped name or a YAML file.
+    seed : int, optional
+        Overrides the scenario's master seed.
+    doe_units : int, default=6
+        Units of the ITL design of experiments.
+    scale : float, default=1.0
+        Multiplies the number of test units (quick looks).
+    progress : callable, optional
+        Called with numbers of flights done.
+    drifted : bool, default=True
+        Whether the test fleet carries the scenario's nominal-parameter drift.
+
+    Returns
+    -------
+    data : EvaluationData
+    knowledge : KnowledgeResult
+    """
+    from fuelhm_bench.datasets import fleet_indicators
+    from fuelhm_bench.knowledge import KnowledgeBuild, build_knowledge
+    from fuelhm_bench.scenarios import load_scenario
+
+    sc = load_scenario(scenario) if not hasattr(scenario, "test_fleet_config") else scenario
+    if seed is not None:  # a new master seed: both fleets re-derived from it
+        sc = dataclasses_replace(sc, seeds=dataclasses_replace(sc.seeds, master=int(seed), training=None, test=None))
+    train_cfg = sc.training_fleet_config()
+    test_cfg = sc.test_fleet_config()
+    if not drifted:
+        test_cfg = dataclasses_replace(test_cfg, nominal=sc.truth_model())
+    if scale != 1.0:
+        test_cfg = dataclasses_replace(test_cfg, n_units=max(1, int(round(test_cfg.n_units * scale))))
+    build = KnowledgeBuild.from_scenario(sc, doe_units=doe_units, seed=train_cfg.seed)
+    build = dataclasses_replace(build, healthy_fleet=train_cfg)
+    knowledge = build_knowledge(build, progress=progress)
+    test_ind, test_lab = fleet_indicators(test_cfg, progress=progress)
+    train = knowledge.healthy_table
+    units = list(dict.fromkeys(train["unit_id"]))
+    n_cal = max(1, int(round(0.25 * len(units)))) if len(units) > 1 else 0
+    cal_units = set(units[len(units) - n_cal:])
+    cal_mask = train["unit_id"].isin(cal_units)
+    fit_part = train[~cal_mask].reset_index(drop=True)
+    cal_part = train[cal_mask].reset_index(drop=True) if n_cal else train.reset_index(drop=True)
+    data = EvaluationData(fit_part, cal_part, test_ind, test_lab, knowledge.as_method_knowledge(), name=sc.name)
+    return data, knowledge
+
+
+def dataclasses_replace(obj, **changes):
+    """``dataclasses.replace`` (kept local to avoid a module-level import cycle in type checkers)."""
+    import dataclasses
+
+    return dataclasses.replace(obj, **changes)
