@@ -1,0 +1,779 @@
+"""The scenario schema (``schema_version: 1``) as typed frozen dataclasses.
+
+A scenario says everything needed to reproduce a benchmark run: the scored
+(test) fleet and its degradation schedule, the flights, the sensor, hidden
+physical effects of the simulated truth, nominal-parameter drift of the scored
+units, the healthy training set, the seeds, the default simulation fidelity and
+the cost model behind rewards. YAML is only its storage
+(:mod:`fuelhm_bench.scenarios.loader`); these classes are the schema, and the
+JSON Schema for editors is generated from them
+(:func:`fuelhm_bench.scenarios.jsonschema.scenario_json_schema`).
+
+Keys in YAML are the field names below, one section per class. Units are in
+the field names (``_min``, ``_hz``, ``_s``, ``_mm``, ``_um``, ``_degc``,
+``_kusd``); fields without a unit are dimensionless.
+
+Versioning
+----------
+``version`` works like a Gymnasium ``-vN`` suffix: any change to a scenario
+that alters simulated data or scores (a number, a mode, a seed, a cost) must
+increment it; only comments and ``description`` may change without a bump.
+``schema_version`` is the version of this file format, not of the scenario.
+
+Rules
+-----
+* Degradation onsets are 0-based flight indices and the window
+  ``[onset_min, onset_max]`` must lie within the unit's flights
+  (``onset_max <= flights_per_unit - 1``).
+* ``simultaneous: false`` (at most one mode per unit): the modes'
+  probabilities plus ``healthy_probability`` must sum to 1.
+  ``simultaneous: true`` (each mode occurs independently with its own
+  probability, so a unit is healthy with probability ``prod(1 - p)``):
+  ``healthy_probability`` must be omitted.
+* ``drift`` changes the nominal model of the scored fleet only (never the
+  training fleet), before manufacturing dispersion; it may not touch a
+  parameter that a degradation mode acts on (that would be an unlabelled
+  fault), nor the controller frame or the ADC resolution (set by ``mission``
+  and ``sensor``).
+* The training and test fleets must have different seeds (otherwise their
+  units would be manufactured identically).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from fuelhm_bench.errors import FuelHMError, ParameterError
+from fuelhm_bench.flights.fleet import FleetConfig
+from fuelhm_bench.flights.mission import MissionProfile
+from fuelhm_bench.flights.schedule import GROWTH_LAWS, ModeSchedule
+from fuelhm_bench.physics.degradations import LAWS
+from fuelhm_bench.physics.effects import EFFECTS, make_effect
+from fuelhm_bench.physics.lvdt import LvdtParams
+from fuelhm_bench.physics.model import COMPONENTS, Dispersion, LoopModel
+from fuelhm_bench.scenarios._fields import Problem, Spec, option, parameter_docs, show, suggest, unknown_key
+from fuelhm_bench.scoring.config import ScoringConfig
+from fuelhm_bench.taxonomy import EFFECT_IDS, MODE_IDS
+
+#: File-format versions this package reads.
+SUPPORTED_SCHEMA_VERSIONS: tuple[int, ...] = (1,)
+#: Simulation fidelities a scenario may ask for by default.
+FIDELITIES: tuple[str, ...] = ("physics", "surrogate")
+#: Kinds of nominal-parameter drift.
+DRIFT_CHANGES: tuple[str, ...] = ("relative", "absolute")
+#: Scenario names: lowercase identifiers (the ``-vN`` suffix is reserved for versions).
+NAME_PATTERN = r"[a-z][a-z0-9_]*"
+
+_MP = MissionProfile()
+_LVDT = LvdtParams()
+_MODE_DEFAULTS = {f.name: f.default for f in dataclasses.fields(ModeSchedule)}
+_PARAM_MSG = re.compile(r"^The '(?P<name>[^']+)' parameter must be (?P<allowed>.*)\. Got (?P<given>.*) instead\.$",
+                        re.S)
+
+#: Model parameters that ``drift`` may not change, with the reason.
+_DRIFT_EXCLUDED: dict[str, str] = {
+    "controller.frame_s": "it is set by mission.frame_rate_hz",
+    "lvdt.adc_bits": "it is set by sensor.adc_bits",
+    **{f"{law.component}.{law.parameter}": f"degradation mode {law.mode} acts on it (drift would be an unlabelled fault)"
+       for law in LAWS.values()},
+}
+
+
+def _physics_problem(exc: FuelHMError, field: str, given: object, context: str = "", *,
+                     same_units: bool = False) -> Problem:
+    """Turn a physics validation error into a :class:`Problem` on a scenario field.
+
+    Parameters
+    ----------
+    exc : FuelHMError
+        The error raised by a physics dataclass (message template of
+        :func:`fuelhm_bench.errors.range_error` when possible).
+    field : str
+        Scenario field path the error is attributed to.
+    given : object
+        The scenario value of that field.
+    context : str, default=""
+        Sentence added as a hint (e.g. what the value would set).
+    same_units : bool, default=False
+        The scenario field is the physics parameter itself (same value and
+        units), so the physics range applies to it directly.
+    """
+    m = _PARAM_MSG.match(str(exc))
+    if m and same_units:
+        allowed = f"{m.group('allowed')} ({m.group('name')})"
+    elif m:
+        allowed = f"such that {m.group('name')} is {m.group('allowed')} (got {m.group('given')})"
+    else:
+        allowed = f"accepted by the physics model ({exc})"
+    return Problem(field, allowed, show(given), context)
+
+
+def drift_parameter_paths(effect_ids: Iterable[str] = ()) -> tuple[str, ...]:
+    """Model parameter paths that ``drift`` entries may change.
+
+    Parameters
+    ----------
+    effect_ids : iterable of str, default=()
+        Hidden effects enabled in the scenario; their parameters
+        (``effect.<id>.<field>``) may drift too.
+
+    Returns
+    -------
+    tuple of str
+        ``component.field`` paths of :class:`~fuelhm_bench.physics.model.LoopModel`
+        minus the excluded ones, then the effect paths.
+    """
+    paths = [f"{comp}.{f.name}" for comp, cls in COMPONENTS.items() for f in dataclasses.fields(cls)]
+    paths += [f"effect.{eid}.{f.name}" for eid in effect_ids for f in dataclasses.fields(EFFECTS[eid])]
+    return tuple(p for p in paths if p not in _DRIFT_EXCLUDED)
+
+
+# ----------------------------------------------------------------------------- sections
+@dataclass(frozen=True, kw_only=True)
+class FleetSpec(Spec):
+    """The scored (test) fleet.
+
+    Parameters
+    ----------
+    units : int
+        Number of units (actuation loops) in the scored fleet, >= 1.
+    flights_per_unit : int
+        Flights flown by each unit, >= 1; degradation onsets are indices into them.
+    dispersion_scale : float, default=1.0
+        Multiplies every standard deviation of the manufacturing dispersion
+        (:class:`~fuelhm_bench.physics.model.Dispersion`), in [0, 10]; 0 gives
+        identical units. Also used for the training fleet.
+    """
+
+    units: int = option(ge=1)
+    flights_per_unit: int = option(ge=1)
+    dispersion_scale: float = option(Dispersion().scale, ge=0.0, le=10.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MissionSpec(Spec):
+    """Structure of a flight (maps onto :class:`~fuelhm_bench.flights.mission.MissionProfile`).
+
+    Parameters
+    ----------
+    duration_min : float, default=60.0
+        Flight duration [min], at least ``(start_duration_s + 60) / 60``.
+    frame_rate_hz : float, default=100.0
+        FADEC frame (and recording) rate [Hz], in [1, 10000]; sets the
+        controller frame of the model too.
+    start_duration_s : float, default=60.0
+        Engine start, including the actuator test sweep [s], in [20, 600].
+    test_sweep : bool, default=true
+        Whether the FADEC strokes the actuator end to end during engine start.
+    sweep_rates_mm_s : list of float, default=[8, 15, 30, 50, 70, 90, 110]
+        Demand ramp rates of the test sweep [mm/s], each in (0, 1000]: one ramp up
+        and down per rate, cut short if the sweep does not fit in start_duration_s.
+    sweep_low_mm : float, default=3.0
+        Low end of the test sweep and of the N2 demand schedule [mm], >= 0.
+    sweep_high_mm : float, default=57.0
+        High end of the test sweep and of the N2 demand schedule [mm], > sweep_low_mm.
+    schedule_n2_low : float, default=0.55
+        N2 (fraction of 100 %) at which the scheduled demand starts to open [-], in [0, 1.2].
+    schedule_n2_high : float, default=1.0
+        N2 at which the scheduled demand is fully open [-], in [0, 1.2], > schedule_n2_low.
+    engine_time_constant_s : float, default=3.0
+        First-order lag of N2 towards each phase's set point [s], > 0.
+    """
+
+    #: scenario field -> (MissionProfile field, conversion to SI)
+    PHYSICS: ClassVar[dict] = {
+        "duration_min": ("duration_s", lambda v: 60.0 * v),
+        "frame_rate_hz": ("frame_s", lambda v: 1.0 / v),
+        "start_duration_s": ("start_duration_s", float),
+        "test_sweep": ("test_sweep", bool),
+        "sweep_rates_mm_s": ("sweep_rates_m_s", lambda v: tuple(1e-3 * r for r in v)),
+        "sweep_low_mm": ("sweep_low_m", lambda v: 1e-3 * v),
+        "sweep_high_mm": ("sweep_high_m", lambda v: 1e-3 * v),
+        "schedule_n2_low": ("schedule_n2_low", float),
+        "schedule_n2_high": ("schedule_n2_high", float),
+        "engine_time_constant_s": ("engine_time_constant_s", float),
+    }
+
+    duration_min: float = option(_MP.duration_s / 60.0, gt=0.0)
+    frame_rate_hz: float = option(1.0 / _MP.frame_s, ge=1.0, le=1e4)
+    start_duration_s: float = option(_MP.start_duration_s, ge=20.0, le=600.0)
+    test_sweep: bool = option(_MP.test_sweep)
+    sweep_rates_mm_s: tuple[float, ...] = option(tuple(1e3 * r for r in _MP.sweep_rates_m_s), gt=0.0, le=1000.0,
+                                                 min_items=1)
+    sweep_low_mm: float = option(1e3 * _MP.sweep_low_m, ge=0.0)
+    sweep_high_mm: float = option(1e3 * _MP.sweep_high_m, gt=0.0)
+    schedule_n2_low: float = option(_MP.schedule_n2_low, ge=0.0, le=1.2)
+    schedule_n2_high: float = option(_MP.schedule_n2_high, ge=0.0, le=1.2)
+    engine_time_constant_s: float = option(_MP.engine_time_constant_s, gt=0.0)
+
+    def _checks(self) -> Iterable[Problem]:
+        shortest = (self.start_duration_s + 60.0) / 60.0
+        if self.duration_min < shortest:
+            yield Problem("duration_min", f">= (start_duration_s + 60 s) / 60 = {shortest:g} min",
+                          show(self.duration_min))
+        if self.sweep_high_mm <= self.sweep_low_mm:
+            yield Problem("sweep_high_mm", f"> sweep_low_mm ({self.sweep_low_mm:g} mm)", show(self.sweep_high_mm))
+        if self.schedule_n2_high <= self.schedule_n2_low:
+            yield Problem("schedule_n2_high", f"> schedule_n2_low ({self.schedule_n2_low:g})",
+                          show(self.schedule_n2_high))
+
+
+@dataclass(frozen=True, kw_only=True)
+class OperatingSpec(Spec):
+    """Operating variability from flight to flight (maps onto ``MissionProfile``).
+
+    Parameters
+    ----------
+    throttle_step_std : float, default=0.025
+        Standard deviation of random throttle steps around each phase's N2 set point [-], in [0, 0.2].
+    throttle_step_interval_s : float, default=90.0
+        Mean interval between throttle steps [s], > 0.
+    n2_noise_std : float, default=0.002
+        Per-frame N2 fluctuation [-], in [0, 0.05].
+    fuel_temp_start_degc : float, default=15.0
+        Mean fuel temperature at the start of a flight [degC], in [-60, 150] (each flight draws around it).
+    fuel_temp_end_degc : float, default=70.0
+        Mean fuel temperature at the end of a flight [degC], in [-60, 150].
+    """
+
+    PHYSICS: ClassVar[dict] = {
+        "throttle_step_std": ("throttle_step_std", float),
+        "throttle_step_interval_s": ("throttle_step_interval_s", float),
+        "n2_noise_std": ("n2_noise_std", float),
+        "fuel_temp_start_degc": ("fuel_temp_start_degc", float),
+        "fuel_temp_end_degc": ("fuel_temp_end_degc", float),
+    }
+
+    throttle_step_std: float = option(_MP.throttle_step_std, ge=0.0, le=0.2)
+    throttle_step_interval_s: float = option(_MP.throttle_step_interval_s, gt=0.0)
+    n2_noise_std: float = option(_MP.n2_noise_std, ge=0.0, le=0.05)
+    fuel_temp_start_degc: float = option(_MP.fuel_temp_start_degc, ge=-60.0, le=150.0)
+    fuel_temp_end_degc: float = option(_MP.fuel_temp_end_degc, ge=-60.0, le=150.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorSpec(Spec):
+    """The LVDT acquisition chain.
+
+    Parameters
+    ----------
+    noise_std_um : float, default=3.0
+        Standard deviation of the additive white position noise [um], >= 0.
+    adc_bits : int, default=12
+        ADC resolution over the LVDT range [bits], in [0, 24]; 0 disables quantization.
+    """
+
+    noise_std_um: float = option(1e6 * _LVDT.noise_std_m, ge=0.0)
+    adc_bits: int = option(_LVDT.adc_bits, ge=0, le=24)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DegradationSpec(Spec):
+    """One degradation mode of the schedule (maps onto :class:`~fuelhm_bench.flights.schedule.ModeSchedule`).
+
+    Parameters
+    ----------
+    mode : str
+        Degradation mode id (paper Table III).
+    probability : float
+        Probability that a unit of the scored fleet develops this mode, in [0, 1].
+    onset_min : int
+        Earliest onset flight (0-based index), >= 0.
+    onset_max : int
+        Latest onset flight (0-based), in [onset_min, flights_per_unit - 1]; each
+        unit draws its onset uniformly in [onset_min, onset_max].
+    growth : str
+        Growth law from the onset: step (maximum at once), linear (reaches the
+        maximum after ramp_flights flights) or exponential (from e^-5 of the
+        maximum, reaching it after ramp_flights flights).
+    ramp_flights : int, default=20
+        Flights from onset to maximum intensity for linear and exponential growth, >= 1.
+    max_intensity : float, default=1.0
+        Maximum intensity, in (0, 1] (1 is the Table III maximum of the mode).
+    """
+
+    mode: str = option(choices=MODE_IDS)
+    probability: float = option(ge=0.0, le=1.0)
+    onset_min: int = option(ge=0)
+    onset_max: int = option(ge=0)
+    growth: str = option(choices=GROWTH_LAWS)
+    ramp_flights: int = option(_MODE_DEFAULTS["ramp_flights"], ge=1)
+    max_intensity: float = option(_MODE_DEFAULTS["max_intensity"], gt=0.0, le=1.0)
+
+    def _checks(self) -> Iterable[Problem]:
+        if self.onset_max < self.onset_min:
+            yield Problem("onset_max", f">= onset_min ({self.onset_min})", show(self.onset_max))
+
+    def schedule(self) -> ModeSchedule:
+        """The simulator's :class:`~fuelhm_bench.flights.schedule.ModeSchedule`."""
+        return ModeSchedule(self.mode, self.probability, self.onset_min, self.onset_max, self.growth,
+                            self.ramp_flights, self.max_intensity)
+
+
+@dataclass(frozen=True, kw_only=True)
+class HiddenEffectSpec(Spec):
+    """An optional physical effect switched on in the simulated truth (methods are not told).
+
+    Parameters
+    ----------
+    effect : str
+        Effect id (PHYSICS.md section 7).
+    parameters : mapping of str to float, default={}
+        Parameter overrides of the effect, SI units as in the parameter names
+        (e.g. coulomb_n for rod_friction); omitted ones take the effect's defaults.
+    """
+
+    effect: str = option(choices=EFFECT_IDS)
+    parameters: tuple[tuple[str, float], ...] = option(default=(), number_map=True)
+
+    def _checks(self) -> Iterable[Problem]:
+        names = [f.name for f in dataclasses.fields(EFFECTS[self.effect])]
+        seen = set()
+        for key, value in self.parameters:
+            if key not in names:
+                yield unknown_key(f"parameters.{key}", key, names)
+            elif key in seen:
+                yield Problem(f"parameters.{key}", "given once", show(value))
+            seen.add(key)
+        if any(k not in names for k, _ in self.parameters):
+            return
+        try:
+            make_effect(self.effect, **dict(self.parameters))
+        except FuelHMError as exc:
+            m = _PARAM_MSG.match(str(exc))
+            key = m.group("name").rpartition(".")[2] if m else ""
+            field = f"parameters.{key}" if key in names else "parameters"
+            yield _physics_problem(exc, field, dict(self.parameters).get(key, dict(self.parameters)),
+                                   same_units=field != "parameters")
+
+    def build(self):
+        """The effect instance (see :func:`fuelhm_bench.physics.effects.make_effect`)."""
+        return make_effect(self.effect, **dict(self.parameters))
+
+    @classmethod
+    def json_schema_extra(cls) -> dict:
+        """Per-effect parameter names, ranges and docs for editors (``if``/``then`` on ``effect``)."""
+        branches = []
+        for eid, ecls in EFFECTS.items():
+            docs = parameter_docs(ecls)
+            props = {f.name: {"type": "number", "description": docs.get(f.name, ""), "default": f.default}
+                     for f in dataclasses.fields(ecls)}
+            branches.append({"if": {"properties": {"effect": {"const": eid}}, "required": ["effect"]},
+                             "then": {"properties": {"parameters": {"type": "object", "properties": props,
+                                                                    "additionalProperties": False}}}})
+        return {"allOf": branches}
+
+
+@dataclass(frozen=True, kw_only=True)
+class DriftSpec(Spec):
+    """A change of one nominal model parameter in the scored fleet (robustness).
+
+    Parameters
+    ----------
+    parameter : str
+        Dotted parameter path of the model, component.field (e.g.
+        servovalve.spool_time_constant_s) or effect.<id>.<field> for a hidden
+        effect; see LoopModel.with_parameters.
+    change : str
+        relative (new = nominal * (1 + value)) or absolute (new = nominal + value,
+        SI units of the parameter).
+    value : float
+        Size of the change: a fraction > -1 for relative, SI units for absolute.
+    """
+
+    parameter: str = option()
+    change: str = option(choices=DRIFT_CHANGES)
+    value: float = option()
+
+    def _checks(self) -> Iterable[Problem]:
+        if self.change == "relative" and self.value <= -1.0:
+            yield Problem("value", "> -1 for a relative change", show(self.value))
+
+    def apply(self, model: LoopModel) -> LoopModel:
+        """Return ``model`` with this drift applied (validated by the physics)."""
+        nominal = model.get(self.parameter)
+        new = nominal * (1.0 + self.value) if self.change == "relative" else nominal + self.value
+        return model.with_parameters({self.parameter: new})
+
+    @classmethod
+    def json_schema_extra(cls) -> dict:
+        """Parameter paths for editors' autocompletion."""
+        effect_pattern = r"^effect\.(" + "|".join(EFFECT_IDS) + r")\.[a-z0-9_]+$"
+        return {"properties": {"parameter": {"anyOf": [{"enum": list(drift_parameter_paths())},
+                                                       {"pattern": effect_pattern}]}}}
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainingSpec(Spec):
+    """The healthy training set methods may learn from (no degradation, no drift).
+
+    Parameters
+    ----------
+    units : int
+        Number of healthy training units, >= 1 (manufactured with the training seed).
+    flights_per_unit : int
+        Healthy flights per training unit, >= 1.
+    """
+
+    units: int = option(ge=1)
+    flights_per_unit: int = option(ge=1)
+
+    @property
+    def n_flights(self) -> int:
+        """Total number of healthy training flights."""
+        return self.units * self.flights_per_unit
+
+
+@dataclass(frozen=True, kw_only=True)
+class SeedSpec(Spec):
+    """Seeds of a run.
+
+    Parameters
+    ----------
+    master : int
+        Master seed, >= 0: seeds any other random choice of a run and derives
+        the fleet seeds that are not given.
+    training : int or None, default=null
+        Seed of the training fleet, >= 0; null derives it from master
+        (SeedSequence([master, 1])).
+    test : int or None, default=null
+        Seed of the scored fleet, >= 0; null derives it from master
+        (SeedSequence([master, 2])).
+    """
+
+    master: int = option(ge=0)
+    training: int | None = option(None, ge=0)
+    test: int | None = option(None, ge=0)
+
+    def _checks(self) -> Iterable[Problem]:
+        if self.training_seed == self.test_seed:
+            yield Problem("test", f"different from the training seed ({self.training_seed}), or the two fleets "
+                                  f"would be manufactured identically", show(self.test), near=("training", "master"))
+
+    @staticmethod
+    def _derive(master: int, stream: int) -> int:
+        return int(np.random.SeedSequence([master, stream]).generate_state(1)[0])
+
+    @property
+    def training_seed(self) -> int:
+        """Seed of the training fleet (given or derived)."""
+        return self.training if self.training is not None else self._derive(self.master, 1)
+
+    @property
+    def test_seed(self) -> int:
+        """Seed of the scored (test) fleet (given or derived)."""
+        return self.test if self.test is not None else self._derive(self.master, 2)
+
+
+@dataclass(frozen=True, kw_only=True)
+class CostSpec(Spec):
+    """Cost model behind rewards, in thousands of US dollars (kUSD).
+
+    The defaults are illustrative orders of magnitude, not airline data.
+    Intensity fractions refer to each mode's max_intensity in the scenario
+    (the published maximal intensity), as in the scorer.
+
+    Parameters
+    ----------
+    false_alarm_kusd : float, default=25.0
+        Cost of a removal of a unit that has no detectable fault (no fault found) [kUSD], >= 0.
+    undetected_flight_kusd : float, default=2.0
+        Cost of each flight flown with a detectable fault that has not been
+        acted upon (risk exposure) [kUSD], >= 0.
+    failure_kusd : float, default=500.0
+        Cost of an in-flight failure, when a degradation reaches failure_fraction [kUSD], >= 0.
+    repair_kusd : float, default=15.0
+        Cost of a correct maintenance action that repairs a faulty unit [kUSD], >= 0.
+    detectable_fraction : float, default=0.25
+        A fault is detectable from this fraction of its maximal intensity on,
+        in (0, 1] (same default as the scorer's detectable_fraction).
+    failure_fraction : float, default=1.0
+        A fault causes an in-flight failure at this fraction of its maximal
+        intensity, in (0, 1], > detectable_fraction.
+    """
+
+    false_alarm_kusd: float = option(25.0, ge=0.0)
+    undetected_flight_kusd: float = option(2.0, ge=0.0)
+    failure_kusd: float = option(500.0, ge=0.0)
+    repair_kusd: float = option(15.0, ge=0.0)
+    detectable_fraction: float = option(ScoringConfig().detectable_fraction, gt=0.0, le=1.0)
+    failure_fraction: float = option(1.0, gt=0.0, le=1.0)
+
+    def _checks(self) -> Iterable[Problem]:
+        if self.failure_fraction <= self.detectable_fraction:
+            yield Problem("failure_fraction", f"> detectable_fraction ({self.detectable_fraction:g})",
+                          show(self.failure_fraction), near=("detectable_fraction",))
+
+
+# ----------------------------------------------------------------------------- scenario
+@dataclass(frozen=True, kw_only=True)
+class Scenario(Spec):
+    """A benchmark scenario (file format ``schema_version: 1``).
+
+    Build one with :func:`fuelhm_bench.scenarios.load_scenario` (shipped name or
+    YAML path) or directly in Python; either way every field is validated and
+    the simulator objects are built once to check them.
+
+    Parameters
+    ----------
+    schema_version : int
+        Version of the scenario file format; only 1 exists.
+    name : str
+        Scenario name, a lowercase identifier (a shipped scenario's file is <name>.yaml).
+    version : int
+        Scenario version, >= 1: increment it for any change that alters simulated
+        data or scores (the id is <name>-v<version>).
+    description : str
+        What the scenario tests.
+    fleet : FleetSpec
+        The scored (test) fleet: units, flights per unit, manufacturing dispersion.
+    mission : MissionSpec, default=MissionSpec()
+        Structure of every flight (duration, frame rate, engine-start test sweep, N2 schedule).
+    operating : OperatingSpec, default=OperatingSpec()
+        Operating variability (throttle steps, N2 noise, fuel temperature).
+    sensor : SensorSpec, default=SensorSpec()
+        LVDT noise and ADC resolution.
+    simultaneous : bool, default=true
+        Whether several degradation modes may act in one unit.
+    healthy_probability : float or None, default=null
+        Probability that a scored unit stays healthy, in [0, 1]; required when
+        simultaneous is false (then it and the modes' probabilities sum to 1),
+        omitted when simultaneous is true.
+    degradations : list of DegradationSpec, default=[]
+        Degradation schedule of the scored fleet (each mode at most once).
+    hidden_effects : list of HiddenEffectSpec, default=[]
+        Optional physical effects of the simulated truth (training and scored
+        fleets), not disclosed to methods (each effect at most once).
+    drift : list of DriftSpec, default=[]
+        Nominal-parameter changes applied to the scored fleet only, in order
+        (each parameter at most once).
+    training : TrainingSpec
+        The healthy training set (units and flights per unit).
+    seeds : SeedSpec
+        Master seed and the training and test fleet seeds.
+    fidelity : str, default="physics"
+        Default simulation fidelity of a run: physics (the numba simulator) or
+        surrogate (a faster approximation, where a runner provides one).
+    costs : CostSpec, default=CostSpec()
+        Cost model behind rewards (kUSD).
+
+    Examples
+    --------
+    >>> from fuelhm_bench.scenarios import load_scenario
+    >>> s = load_scenario("paper_2012")
+    >>> s.id
+    'paper_2012-v1'
+    >>> s.test_fleet_config().n_units == s.fleet.units
+    True
+    """
+
+    schema_version: int = option(choices=SUPPORTED_SCHEMA_VERSIONS)
+    name: str = option(pattern=NAME_PATTERN)
+    version: int = option(ge=1)
+    description: str = option()
+    fleet: FleetSpec = option()
+    mission: MissionSpec = option(default_factory=MissionSpec)
+    operating: OperatingSpec = option(default_factory=OperatingSpec)
+    sensor: SensorSpec = option(default_factory=SensorSpec)
+    simultaneous: bool = option(True)
+    healthy_probability: float | None = option(None, ge=0.0, le=1.0)
+    degradations: tuple[DegradationSpec, ...] = option(())
+    hidden_effects: tuple[HiddenEffectSpec, ...] = option(())
+    drift: tuple[DriftSpec, ...] = option(())
+    training: TrainingSpec = option()
+    seeds: SeedSpec = option()
+    fidelity: str = option("physics", choices=FIDELITIES)
+    costs: CostSpec = option(default_factory=CostSpec)
+
+    # ------------------------------------------------------------------ identity
+    @property
+    def id(self) -> str:
+        """``<name>-v<version>``, e.g. ``"all_modes-v1"``."""
+        return f"{self.name}-v{self.version}"
+
+    # -------------------------------------------------------------- simulator objects
+    def mission_profile(self) -> MissionProfile:
+        """The flight profile of every flight (training and scored)."""
+        kwargs = {}
+        for section in (self.mission, self.operating):
+            for name, (phys, convert) in type(section).PHYSICS.items():
+                kwargs[phys] = convert(getattr(section, name))
+        return MissionProfile(**kwargs)
+
+    def published_model(self) -> LoopModel:
+        """The nominal model methods may be told about: frame rate and sensor, no hidden effect, no drift."""
+        return LoopModel().with_parameters({
+            "controller.frame_s": 1.0 / self.mission.frame_rate_hz,
+            "lvdt.noise_std_m": 1e-6 * self.sensor.noise_std_um,
+            "lvdt.adc_bits": self.sensor.adc_bits,
+        })
+
+    def truth_model(self) -> LoopModel:
+        """The simulated truth: :meth:`published_model` with the hidden effects switched on."""
+        model = self.published_model()
+        for spec in self.hidden_effects:
+            model = model.with_effect(spec.build())
+        return model
+
+    def drifted_model(self) -> LoopModel:
+        """The scored fleet's nominal model: :meth:`truth_model` with the drift applied in order."""
+        model = self.truth_model()
+        for spec in self.drift:
+            model = spec.apply(model)
+        return model
+
+    def dispersion(self) -> Dispersion:
+        """Manufacturing dispersion of both fleets."""
+        return dataclasses.replace(Dispersion(), scale=self.fleet.dispersion_scale)
+
+    def mode_schedules(self) -> tuple[ModeSchedule, ...]:
+        """Degradation schedules of the scored fleet."""
+        return tuple(d.schedule() for d in self.degradations)
+
+    def training_fleet_config(self) -> FleetConfig:
+        """The healthy training fleet: truth model (hidden effects, no drift), no degradation, training seed."""
+        return FleetConfig(n_units=self.training.units, n_flights=self.training.flights_per_unit,
+                           mission=self.mission_profile(), nominal=self.truth_model(), dispersion=self.dispersion(),
+                           schedules=(), simultaneous=True, seed=self.seeds.training_seed)
+
+    def test_fleet_config(self) -> FleetConfig:
+        """The scored fleet: drifted truth model, degradation schedule, test seed."""
+        return FleetConfig(n_units=self.fleet.units, n_flights=self.fleet.flights_per_unit,
+                           mission=self.mission_profile(), nominal=self.drifted_model(), dispersion=self.dispersion(),
+                           schedules=self.mode_schedules(), simultaneous=self.simultaneous,
+                           seed=self.seeds.test_seed)
+
+    # ------------------------------------------------------------------ checks
+    def _checks(self) -> Iterable[Problem]:
+        problems = list(self._schedule_checks()) + list(self._effect_checks())
+        if not problems:
+            problems += self._drift_checks()
+        if not problems:
+            problems += self._physics_checks()
+        return problems
+
+    def _schedule_checks(self) -> Iterator[Problem]:
+        last = self.fleet.flights_per_unit - 1
+        seen: dict[str, int] = {}
+        for i, d in enumerate(self.degradations):
+            where = f"degradations[{i}]"
+            if d.mode in seen:
+                yield Problem(f"{where}.mode", f"a mode not already scheduled (degradations[{seen[d.mode]}] "
+                                               f"is {d.mode})", show(d.mode))
+            seen.setdefault(d.mode, i)
+            if d.onset_min > last:
+                yield Problem(f"{where}.onset_min", f"<= the last flight index, flights_per_unit - 1 = {last} "
+                                                    f"(onsets are 0-based)", show(d.onset_min))
+            elif d.onset_max > last:
+                yield Problem(f"{where}.onset_max", f"<= the last flight index, flights_per_unit - 1 = {last} "
+                                                    f"(onsets are 0-based)", show(d.onset_max))
+        if self.simultaneous:
+            if self.healthy_probability is not None:
+                yield Problem("healthy_probability", "omitted when simultaneous is true (each mode then occurs "
+                                                     "independently; a unit is healthy with probability prod(1 - p))",
+                              show(self.healthy_probability))
+            return
+        if self.healthy_probability is None:
+            yield Problem("healthy_probability", "given when simultaneous is false (a number in [0, 1] such that it "
+                                                 "and the degradation probabilities sum to 1)",
+                          show(self.healthy_probability), near=("simultaneous",))
+            return
+        probs = [d.probability for d in self.degradations]
+        total = math.fsum(probs) + self.healthy_probability
+        if not math.isclose(total, 1.0, rel_tol=0.0, abs_tol=1e-9):
+            terms = " + ".join(f"{p:g}" for p in probs + [self.healthy_probability])
+            rest = 1.0 - math.fsum(probs)
+            hint = (f"healthy_probability: {rest:g} would make them sum to 1." if rest >= 0.0 else
+                    f"The degradation probabilities alone sum to {1.0 - rest:g} > 1.")
+            yield Problem("healthy_probability",
+                          f"such that the degradation probabilities plus healthy_probability sum to 1 when "
+                          f"simultaneous is false ({terms} = {total:g})",
+                          show(self.healthy_probability), hint, near=("simultaneous",))
+
+    def _effect_checks(self) -> Iterator[Problem]:
+        seen: dict[str, int] = {}
+        for i, e in enumerate(self.hidden_effects):
+            if e.effect in seen:
+                yield Problem(f"hidden_effects[{i}].effect", f"an effect not already enabled (hidden_effects"
+                                                             f"[{seen[e.effect]}] is {e.effect})", show(e.effect))
+            seen.setdefault(e.effect, i)
+
+    def _drift_checks(self) -> list[Problem]:
+        problems: list[Problem] = []
+        effect_ids = [e.effect for e in self.hidden_effects]
+        allowed = drift_parameter_paths(effect_ids)
+        seen: dict[str, int] = {}
+        for i, d in enumerate(self.drift):
+            field = f"drift[{i}].parameter"
+            if d.parameter in _DRIFT_EXCLUDED:
+                problems.append(Problem(field, f"a parameter that drift may change; not {d.parameter}, because "
+                                               f"{_DRIFT_EXCLUDED[d.parameter]}", show(d.parameter)))
+            elif d.parameter not in allowed:
+                problems.append(Problem(field, _drift_allowed_text(d.parameter, effect_ids), show(d.parameter),
+                                        suggest(d.parameter, allowed)))
+            elif d.parameter in seen:
+                problems.append(Problem(field, f"a parameter not already drifted (drift[{seen[d.parameter]}])",
+                                        show(d.parameter)))
+            seen.setdefault(d.parameter, i)
+        if problems:
+            return problems
+        model = self.truth_model()
+        for i, d in enumerate(self.drift):
+            nominal = model.get(d.parameter)
+            if d.change == "relative" and nominal == 0.0:
+                problems.append(Problem(f"drift[{i}].change", f"absolute for {d.parameter}, whose nominal value is 0 "
+                                                              f"(a relative change would do nothing)", show(d.change)))
+                continue
+            try:
+                model = d.apply(model)
+            except FuelHMError as exc:
+                new = nominal * (1.0 + d.value) if d.change == "relative" else nominal + d.value
+                problems.append(_physics_problem(exc, f"drift[{i}].value", d.value,
+                                                 f"It would set {d.parameter} from {nominal:g} to {new:g}."))
+        return problems
+
+    def _physics_checks(self) -> list[Problem]:
+        problems: list[Problem] = []
+        try:
+            self.mission_profile()
+        except ParameterError as exc:
+            problems.append(self._mission_problem(exc))
+        if problems:
+            return problems
+        for label, build in (("training", self.training_fleet_config), ("fleet", self.test_fleet_config)):
+            try:
+                build()
+            except FuelHMError as exc:
+                problems.append(_physics_problem(exc, label, getattr(self, label).to_dict()))
+        return problems
+
+    def _mission_problem(self, exc: ParameterError) -> Problem:
+        m = _PARAM_MSG.match(str(exc))
+        phys = m.group("name").rpartition(".")[2] if m else ""
+        for section, name in ((self.mission, "mission"), (self.operating, "operating")):
+            for field, (target, _) in type(section).PHYSICS.items():
+                if target == phys:
+                    return _physics_problem(exc, f"{name}.{field}", getattr(section, field))
+        return _physics_problem(exc, "mission", self.mission.to_dict())
+
+
+def _drift_allowed_text(path: str, effect_ids: list[str]) -> str:
+    comp, _, _ = path.partition(".")
+    if comp in COMPONENTS:
+        fields = [f.name for f in dataclasses.fields(COMPONENTS[comp]) if f"{comp}.{f.name}" not in _DRIFT_EXCLUDED]
+        return f"a parameter path of the model; for {comp}: {comp}.{{{', '.join(fields)}}}"
+    if comp == "effect":
+        parts = path.split(".")
+        if len(parts) == 3 and parts[1] in EFFECTS and parts[1] not in effect_ids:
+            return (f"a parameter of an enabled hidden effect (enabled: {', '.join(effect_ids) or 'none'}; "
+                    f"add {parts[1]} to hidden_effects first)")
+        return f"effect.<id>.<field> with <id> an enabled hidden effect ({', '.join(effect_ids) or 'none enabled'})"
+    extra = " or effect.<id>.<field> for an enabled hidden effect"
+    return f"a parameter path component.field with component one of {', '.join(COMPONENTS)}{extra}"

@@ -1,0 +1,63 @@
+"""Tests of the 'validate' and 'schema' commands (fuelhm_bench.cli.validate / .schema)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from fuelhm_bench.cli import main
+from fuelhm_bench.scenarios import list_scenarios, scenario_json_schema
+
+BROKEN = Path(__file__).parent / "data" / "scenarios_broken"
+
+
+def test_validate_valid_file(capsys):
+    path = BROKEN / "valid_base.yaml"
+    assert main(["validate", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("OK") and "broken-v1" in out
+
+
+def test_validate_shipped(capsys):
+    assert main(["validate", "--shipped"]) == 0
+    out = capsys.readouterr().out
+    for name in list_scenarios():
+        assert f"{name} ({name}-v" in out
+    assert f"{len(list_scenarios())} valid, 0 invalid" in out
+
+
+def test_validate_mixed_files_exit_1_and_print_every_error(capsys):
+    good, bad = BROKEN / "valid_base.yaml", BROKEN / "several_problems.yaml"
+    assert main(["validate", str(good), str(bad), "paper_2012"]) == 1
+    out = capsys.readouterr().out
+    assert f"OK      {good}" in out and f"INVALID {bad}" in out
+    assert f"{bad}:7: fleet.units must be an integer >= 1. Got 0 instead." in out
+    assert f"{bad}:16: sensor.adc_bits" in out and f"{bad}:25: degradations[1].mode" in out
+    assert "2 valid, 1 invalid" in out
+
+
+def test_validate_malformed_and_unknown_name(capsys):
+    assert main(["validate", str(BROKEN / "malformed.yaml")]) == 1
+    assert "malformed.yaml:24: the document must be well-formed YAML" in capsys.readouterr().out
+    assert main(["validate", "paper2012"]) == 1
+    assert "Did you mean 'paper_2012'?" in capsys.readouterr().out
+
+
+def test_validate_without_arguments(capsys):
+    assert main(["validate"]) == 1
+    assert "give at least one FILE or --shipped" in capsys.readouterr().out
+
+
+def test_schema_prints_json(capsys):
+    assert main(["schema"]) == 0
+    assert json.loads(capsys.readouterr().out) == scenario_json_schema()
+
+
+def test_schema_writes_file_and_refuses_overwrite(tmp_path, capsys):
+    out = tmp_path / "sub" / "scenario.schema.json"
+    assert main(["schema", "--out", str(out)]) == 0
+    assert json.loads(out.read_text()) == scenario_json_schema()
+    assert str(out) in capsys.readouterr().out
+    assert main(["schema", "--out", str(out)]) == 2
+    assert "refusing to overwrite" in capsys.readouterr().err
+    assert main(["schema", "--out", str(out), "--force"]) == 0
