@@ -258,11 +258,12 @@ def scenario_data(scenario, *, seed: int | None = None, doe_units: int = 6, scal
         test_cfg = dataclasses_replace(test_cfg, nominal=sc.truth_model())
     if scale != 1.0:
         test_cfg = dataclasses_replace(test_cfg, n_units=max(1, int(round(test_cfg.n_units * scale))))
+    # The published knowledge (healthy spread for the signatures, ITL) comes from the benchmark's own
+    # simulations of the published model, whatever the amount of data the methods are given.
     build = KnowledgeBuild.from_scenario(sc, doe_units=doe_units, seed=train_cfg.seed)
-    build = dataclasses_replace(build, healthy_fleet=train_cfg)
     knowledge = build_knowledge(build, progress=progress)
+    train, _ = fleet_indicators(train_cfg, progress=progress)
     test_ind, test_lab = fleet_indicators(test_cfg, progress=progress)
-    train = knowledge.healthy_table
     units = list(dict.fromkeys(train["unit_id"]))
     n_cal = max(1, int(round(0.25 * len(units)))) if len(units) > 1 else 0
     cal_units = set(units[len(units) - n_cal:])
