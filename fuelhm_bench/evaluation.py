@@ -51,6 +51,9 @@ class EvaluationData:
         Published knowledge handed to ``fit``.
     name : str
         Data-set name for reports.
+    nominal : EvaluationData or None
+        For a scenario with nominal-parameter drift: the same test fleet (same seeds) without
+        the drift, to measure robustness (:func:`fuelhm_bench.scoring.robustness`).
     """
 
     fit_indicators: pd.DataFrame
@@ -59,6 +62,7 @@ class EvaluationData:
     test_labels: pd.DataFrame
     knowledge: object = None
     name: str = "dataset"
+    nominal: EvaluationData | None = None
 
 
 @dataclass(frozen=True)
@@ -238,7 +242,8 @@ def scenario_data(scenario, *, seed: int | None = None, doe_units: int = 6, scal
     progress : callable, optional
         Called with numbers of flights done.
     drifted : bool, default=True
-        Whether the test fleet carries the scenario's nominal-parameter drift.
+        Whether the test fleet carries the scenario's nominal-parameter drift. When it does
+        (and the scenario has drift), ``data.nominal`` holds the same fleet without the drift.
 
     Returns
     -------
@@ -270,7 +275,14 @@ def scenario_data(scenario, *, seed: int | None = None, doe_units: int = 6, scal
     cal_mask = train["unit_id"].isin(cal_units)
     fit_part = train[~cal_mask].reset_index(drop=True)
     cal_part = train[cal_mask].reset_index(drop=True) if n_cal else train.reset_index(drop=True)
-    data = EvaluationData(fit_part, cal_part, test_ind, test_lab, knowledge.as_method_knowledge(), name=sc.name)
+    nominal = None
+    if drifted and sc.drift:
+        nom_cfg = dataclasses_replace(test_cfg, nominal=sc.truth_model())
+        nom_ind, nom_lab = fleet_indicators(nom_cfg, progress=progress)
+        nominal = EvaluationData(fit_part, cal_part, nom_ind, nom_lab, knowledge.as_method_knowledge(),
+                                 name=f"{sc.name} (no drift)")
+    data = EvaluationData(fit_part, cal_part, test_ind, test_lab, knowledge.as_method_knowledge(), name=sc.name,
+                          nominal=nominal)
     return data, knowledge
 
 

@@ -15,13 +15,12 @@ from fuelhm_bench.evaluation import load_method, parse_params, run_method, scena
 from fuelhm_bench.methods import BaseMethod, Decision
 
 
-def tiny_scenario(tmp_path, name="tiny"):
-    """paper_2012 shrunk: 3 test units x 8 flights, 4 x 4 healthy training flights, 5-minute flights."""
+def tiny_scenario(tmp_path, name="tiny", base="paper_2012"):
+    """A shipped scenario shrunk: 3 test units x 8 flights, 4 x 4 healthy training flights, 5-minute flights."""
     from fuelhm_bench.scenarios import shipped_scenario_files
 
-    src = dict(shipped_scenario_files())["paper_2012"] if isinstance(shipped_scenario_files(), dict) else None
-    if src is None:
-        src = next(p for p in shipped_scenario_files() if "paper_2012" in str(p))
+    files = shipped_scenario_files()
+    src = files[base] if isinstance(files, dict) else next(p for p in files if f"{base}.yaml" in str(p))
     data = yaml.safe_load(open(src))
     data["name"] = name
     data["fleet"]["units"] = 3
@@ -127,3 +126,14 @@ def test_paper_command_small(tiny, tmp_path, capsys):
                  "fig5_indicators.png", "fig8a_drift.png", "fig8b_leak.png", "fig10_scores.png"):
         assert (out / name).exists(), name
     assert "Where and why the numbers differ" in (out / "report.md").read_text()
+
+
+def test_evaluate_reports_robustness_under_drift(tmp_path):
+    path = tiny_scenario(tmp_path, "tinydrift", base="robustness_drift")
+    out = tmp_path / "eval"
+    assert main(["evaluate", "--method", "baselines.paper_mahalanobis:PaperMahalanobis", "--scenario", str(path),
+                 "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    kpis = summary["methods"][0]["kpis"]
+    assert kpis["robustness"] is not None and 0.0 < kpis["robustness"] < 2.0
+    assert (out / "baselines.paper_mahalanobis_PaperMahalanobis" / "robustness.csv").exists()

@@ -80,6 +80,16 @@ def run(args: argparse.Namespace) -> int:
             save_figure(plot_score_distributions(run_, card.config), mdir / "score_distributions.png")
             outcome.decisions.to_csv(mdir / "decisions.csv", index=False)
             kpis = headline_kpis(card)
+            if data.nominal is not None:  # robustness: same method, same fleet without the drift
+                from fuelhm_bench.scoring import robustness, robustness_table
+
+                nom = run_method(method, data.nominal, random_state=args.method_seed, timeout_s=args.timeout)
+                if nom.ok:
+                    nom_card = score_outcome(nom, data.nominal)
+                    kpis["robustness"] = robustness(nom_card, card)
+                    robustness_table(nom_card, card).to_csv(mdir / "robustness.csv", index=False)
+                else:
+                    entry["robustness_message"] = f"nominal run {nom.status}: {nom.message.splitlines()[0]}"
             entry["kpis"] = {k: (None if v != v else float(v)) for k, v in kpis.items()}
             print(f"{spec}: ok in {outcome.seconds:.1f} s; " +
                   ", ".join(f"{k}={v:.3g}" for k, v in kpis.items() if v == v), file=sys.stderr)
