@@ -154,14 +154,17 @@ def window_mean(stack: np.ndarray) -> np.ndarray:
 
 
 def cross_fit_folds(n: int, cv: Any, rng: np.random.Generator,
-                    owner: str) -> list[tuple[np.ndarray, np.ndarray]]:
+                    owner: str, groups: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """Train/held-out splits of ``n`` training flights for out-of-fold scores.
 
     Parameters
     ----------
     n : int
         Number of training flights.
-    cv : {"loo"}, int >= 2 or None
+    cv : {"units", "loo"}, int >= 2 or None
+        ``"units"``: leave one unit out (one split per distinct ``groups`` value, so
+        held-out flights come from a unit the model never saw, like a new engine;
+        falls back to ``"loo"`` when ``groups`` is None or has fewer than 3 units);
         ``"loo"``: leave one flight out (``n`` splits, no randomness); int ``k``:
         ``k`` folds of a random permutation drawn from ``rng``; None: a single
         in-sample "split" (train = held-out = all flights).
@@ -169,6 +172,8 @@ def cross_fit_folds(n: int, cv: Any, rng: np.random.Generator,
         Used only for ``k`` folds.
     owner : str
         Class name for error messages.
+    groups : ndarray of shape (n,), optional
+        Unit of each flight (for ``"units"``).
 
     Returns
     -------
@@ -183,6 +188,11 @@ def cross_fit_folds(n: int, cv: Any, rng: np.random.Generator,
     everything = np.arange(n)
     if cv is None:
         return [(everything, everything)]
+    if cv == "units":
+        if groups is not None and len(np.unique(groups)) >= 3:
+            uniq = list(dict.fromkeys(groups.tolist()))
+            return [(everything[groups != g], everything[groups == g]) for g in uniq]
+        cv = "loo"
     k = n if cv == "loo" else int(cv)
     if n < max(k, 2):
         raise ValueError(f"The 'cv' parameter of {owner} must not exceed the number of healthy "

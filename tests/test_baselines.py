@@ -145,7 +145,7 @@ def test_baselines_use_only_the_public_api():
     (PaperMahalanobis(a=-1), r"The 'a' parameter of PaperMahalanobis must be a float in "
                              r"\[0, inf\). Got -1 instead."),
     (PaperMahalanobis(window=0), r"The 'window' parameter of PaperMahalanobis must be an int"),
-    (PaperMahalanobis(cv=1), r"The 'cv' parameter of PaperMahalanobis must be one of 'loo', "
+    (PaperMahalanobis(cv=1), r"The 'cv' parameter of PaperMahalanobis must be one of 'loo', 'units', "
                              r"an int in \[2, inf\) or None. Got 1 instead."),
     (PaperMahalanobis(symmetric_modes=["null_bias_drift"]),
      r"The 'symmetric_modes' parameter of PaperMahalanobis must be a tuple of distinct mode ids"),
@@ -319,7 +319,7 @@ def test_leave_one_out_threshold_is_not_biased_low(world):
     """
     train = world["train"].iloc[:60]
     k = world["knowledge"]
-    loo = PaperMahalanobis().fit(train, knowledge=k, random_state=0)
+    loo = PaperMahalanobis(cv="loo").fit(train, knowledge=k, random_state=0)
     kfold = PaperMahalanobis(cv=5).fit(train, knowledge=k, random_state=0)
     in_sample = PaperMahalanobis(cv=None).fit(train, knowledge=k, random_state=0)
     assert np.all(loo.training_scores_ > in_sample.training_scores_)
@@ -517,3 +517,19 @@ def test_readme_submission_example_passes_the_checks(monkeypatch):
     monkeypatch.setitem(sys.modules, module.__name__, module)
     exec(compile(code, "baselines/README.md", "exec"), module.__dict__)
     check_method(module.MySubmission())
+
+
+def test_leave_one_unit_out_accounts_for_unit_dispersion(world):
+    """With a unit effect in the healthy data, flight-LOO keeps the unit's other flights in training:
+    its threshold is biased low for a new unit; leave-one-unit-out is not."""
+    from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+    rng = np.random.default_rng(3)
+    train = world["train"].iloc[:120].copy()
+    train["unit_id"] = np.repeat(np.arange(12), 10)
+    offsets = rng.normal(0.0, 1.0, (12, len(INDICATOR_NAMES))) * train[list(INDICATOR_NAMES)].std().to_numpy()
+    train[list(INDICATOR_NAMES)] += np.repeat(offsets, 10, axis=0)
+    k = world["knowledge"]
+    by_unit = PaperMahalanobis(cv="units").fit(train, knowledge=k, random_state=0)
+    by_flight = PaperMahalanobis(cv="loo").fit(train, knowledge=k, random_state=0)
+    assert by_unit.threshold_ > by_flight.threshold_ + 0.3

@@ -1,0 +1,237 @@
+"""Evaluate several methods on one or several scenarios and rank them (the leaderboard).
+
+:func:`evaluate_methods` is the shared core of ``fuelhm-bench evaluate`` and
+``fuelhm-bench leaderboard``: it runs every method safely
+(:func:`~fuelhm_bench.evaluation.run_method`), scores the ones that worked, writes
+their tables and figures, and returns one summary entry per method (status,
+hyperparameters, headline KPIs, robustness when the scenario drifts). A
+leaderboard configuration (``leaderboard/methods.yaml``) lists methods and
+scenarios; :func:`run_leaderboard` runs them all and writes ``leaderboard.md`` /
+``leaderboard.csv`` ranked by the summary score (null method = 0, perfect = 100).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+from fuelhm_bench.errors import FuelHMError, ScenarioError
+
+
+def slug(text: str) -> str:
+    """A file-name-safe version of a method spec."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_")[:80]
+
+
+def prepare_methods(specs: list[tuple[str, dict]], shared_params: dict | None = None, *,
+                    log: Callable[[str], object] = lambda s: print(s, file=sys.stderr)):
+    """Instantiate methods; unloadable ones become error entries instead of aborting the run.
+
+    Parameters
+    ----------
+    specs : list of (str, dict)
+        ``module:Class`` and its own hyperparameters.
+    shared_params : dict, optional
+        Hyperparameters applied to every method that has them.
+
+    Returns
+    -------
+    methods : list of (str, BaseMethod)
+    errors : list of dict
+        Summary entries of the methods that could not be built.
+    """
+    from fuelhm_bench.evaluation import load_method
+
+    shared = dict(shared_params or {})
+    methods, errors = [], []
+    for spec, own in specs:
+        try:
+            m = load_method(spec, own)
+            common = {k: v for k, v in shared.items() if k in m.get_params()}
+            methods.append((spec, m.set_params(**common) if common else m))
+        except (FuelHMError, ValueError, TypeError) as exc:
+            errors.append({"method": spec, "status": "error", "seconds": 0.0, "message": f"cannot load: {exc}"})
+            log(f"{spec}: ERROR: cannot load: {exc}")
+    unknown = [k for k in shared if not any(k in m.get_params() for _, m in methods)]
+    if unknown and methods:
+        raise FuelHMError(f"--param {', '.join(unknown)}: no evaluated method has such a hyperparameter.")
+    return methods, errors
+
+
+def evaluate_methods(methods, data, out: Path, *, method_seed: int = 0, timeout_s: float = 600.0,
+                     log: Callable[[str], object] = lambda s: print(s, file=sys.stderr)) -> list[dict]:
+    """Run, score and write every method; one summary entry per method."""
+    from fuelhm_bench.evaluation import run_method, score_outcome
+    from fuelhm_bench.scoring import (Run, headline_kpis, plot_score_distributions, robustness, robustness_table,
+                                      save_figure, write_tables)
+
+    summary = []
+    for spec, method in methods:
+        outcome = run_method(method, data, random_state=method_seed, timeout_s=timeout_s)
+        entry = {"method": spec, "params": {k: repr(v) for k, v in method.get_params().items()},
+                 "status": outcome.status, "seconds": round(outcome.seconds, 2)}
+        mdir = Path(out) / slug(spec)
+        if outcome.ok:
+            card = score_outcome(outcome, data)
+            write_tables(card, mdir, overwrite=True)
+            run = Run(labels=data.test_labels, decisions=outcome.decisions, healthy_scores=outcome.healthy_scores,
+                      name=spec)
+            save_figure(plot_score_distributions(run, card.config), mdir / "score_distributions.png")
+            outcome.decisions.to_csv(mdir / "decisions.csv", index=False)
+            kpis = headline_kpis(card)
+            if data.nominal is not None:  # robustness: same method, same fleet without the drift
+                nom = run_method(method, data.nominal, random_state=method_seed, timeout_s=timeout_s)
+                if nom.ok:
+                    nom_card = score_outcome(nom, data.nominal)
+                    kpis["robustness"] = robustness(nom_card, card)
+                    robustness_table(nom_card, card).to_csv(mdir / "robustness.csv", index=False)
+                else:
+                    entry["robustness_message"] = f"nominal run {nom.status}: {nom.message.splitlines()[0]}"
+            entry["kpis"] = {k: (None if v != v else float(v)) for k, v in kpis.items()}
+            log(f"{spec}: ok in {outcome.seconds:.1f} s; "
+                + ", ".join(f"{k}={v:.3g}" for k, v in kpis.items() if v == v))
+        else:
+            entry["message"] = outcome.message
+            log(f"{spec}: {outcome.status.upper()}: {outcome.message.splitlines()[0] if outcome.message else ''}")
+        summary.append(entry)
+    return summary
+
+
+def summary_table(summary: list[dict]) -> pd.DataFrame:
+    """One row per method: status and headline KPIs."""
+    return pd.DataFrame([{"method": e["method"], "status": e["status"], **(e.get("kpis") or {})} for e in summary])
+
+
+def write_evaluation_report(out: Path, scenario_id: str, data, summary: list[dict], meta: dict) -> pd.DataFrame:
+    """Write ``summary.json`` and ``report.md`` for one scenario; returns the summary table."""
+    from fuelhm_bench.scoring import to_markdown
+
+    out = Path(out)
+    (out / "summary.json").write_text(json.dumps({"scenario": scenario_id, **meta, "methods": summary}, indent=2))
+    table = summary_table(summary)
+    lines = [f"# Evaluation on `{scenario_id}`", "",
+             f"{len(data.test_indicators)} test flights, {len(data.fit_indicators)} healthy fitting flights, "
+             f"{len(data.calibration_indicators)} healthy calibration flights (threshold setting).", "",
+             to_markdown(table.round(4)), ""]
+    for e in summary:
+        msg = e.get("message", "").splitlines()[0] if e.get("message") else ""
+        lines.append(f"* `{e['method']}`: **{e['status']}** {msg}")
+    lines += ["", "Per-method tables: one directory per method (CSV, Markdown, LaTeX).", ""]
+    (out / "report.md").write_text("\n".join(lines))
+    return table
+
+
+@dataclass(frozen=True)
+class LeaderboardEntry:
+    """A method of the leaderboard: ``module:Class`` and its hyperparameters."""
+
+    method: str
+    params: tuple = ()
+
+
+@dataclass(frozen=True)
+class LeaderboardConfig:
+    """What a leaderboard run evaluates.
+
+    Parameters
+    ----------
+    methods : tuple of LeaderboardEntry
+    scenarios : tuple of str
+        Shipped names or YAML paths.
+    seeds : tuple of int, default=(None,)
+        Master seeds (None: the scenario's own).
+    scale : float, default=1.0
+        Multiplies the number of test units.
+    timeout_s : float, default=900.0
+        Time limit per method and scenario.
+    """
+
+    methods: tuple
+    scenarios: tuple
+    seeds: tuple = (None,)
+    scale: float = 1.0
+    timeout_s: float = 900.0
+
+    @classmethod
+    def from_yaml(cls, path) -> LeaderboardConfig:
+        """Load ``leaderboard/methods.yaml`` (safe loader; errors name the file and field)."""
+        path = Path(path)
+        try:
+            data = yaml.safe_load(path.read_text())
+        except (OSError, yaml.YAMLError) as exc:
+            raise ScenarioError(f"{path}: cannot read the leaderboard file: {exc}") from None
+        if not isinstance(data, dict):
+            raise ScenarioError(f"{path}: a leaderboard file is a mapping with 'methods' and 'scenarios'.")
+        allowed = {"methods", "scenarios", "seeds", "scale", "timeout_s"}
+        for key in data:
+            if key not in allowed:
+                import difflib
+
+                close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
+                raise ScenarioError(f"{path}: unknown key '{key}'. Allowed: {', '.join(sorted(allowed))}."
+                                    + (f" Did you mean '{close[0]}'?" if close else ""))
+        methods = []
+        for i, m in enumerate(data.get("methods") or []):
+            if isinstance(m, str):
+                methods.append(LeaderboardEntry(m))
+            elif isinstance(m, dict) and isinstance(m.get("method"), str):
+                params = m.get("params") or {}
+                if not isinstance(params, dict):
+                    raise ScenarioError(f"{path}: methods[{i}].params must be a mapping. Got {params!r} instead.")
+                methods.append(LeaderboardEntry(m["method"], tuple(sorted(params.items()))))
+            else:
+                raise ScenarioError(f"{path}: methods[{i}] must be 'module:Class' or {{method: ..., params: ...}}. "
+                                    f"Got {m!r} instead.")
+        scenarios = data.get("scenarios") or []
+        if not methods or not scenarios:
+            raise ScenarioError(f"{path}: 'methods' and 'scenarios' must both be non-empty lists.")
+        return cls(tuple(methods), tuple(str(s) for s in scenarios), tuple(data.get("seeds") or [None]),
+                   float(data.get("scale", 1.0)), float(data.get("timeout_s", 900.0)))
+
+
+def run_leaderboard(config: LeaderboardConfig, out: Path, *, progress_factory=None,
+                    log: Callable[[str], object] = lambda s: print(s, file=sys.stderr)) -> pd.DataFrame:
+    """Evaluate every method on every scenario and seed; write and return the ranked leaderboard."""
+    from fuelhm_bench.evaluation import scenario_data
+    from fuelhm_bench.scenarios import load_scenario
+    from fuelhm_bench.scoring import to_markdown
+
+    out = Path(out)
+    rows = []
+    for scenario in config.scenarios:
+        sc = load_scenario(scenario)
+        for seed in config.seeds:
+            t0 = time.perf_counter()
+            if progress_factory is not None:
+                n = (sc.training_fleet_config().n_units * sc.training_fleet_config().n_flights
+                     + sc.test_fleet_config().n_units * sc.test_fleet_config().n_flights)
+                with progress_factory(n, f"{sc.id} seed {seed}") as bar:
+                    data, _ = scenario_data(sc, seed=seed, scale=config.scale, progress=bar.update)
+            else:
+                data, _ = scenario_data(sc, seed=seed, scale=config.scale)
+            sdir = out / f"{sc.id}-seed{seed if seed is not None else sc.seeds.master}"
+            sdir.mkdir(parents=True, exist_ok=True)
+            methods, errors = prepare_methods([(m.method, dict(m.params)) for m in config.methods], log=log)
+            summary = errors + evaluate_methods(methods, data, sdir, timeout_s=config.timeout_s, log=log)
+            write_evaluation_report(sdir, sc.id, data, summary, {"seed": seed,
+                                                                 "data_seconds": round(time.perf_counter() - t0, 1)})
+            for e in summary:
+                rows.append({"scenario": sc.id, "seed": seed if seed is not None else sc.seeds.master,
+                             "method": e["method"], "status": e["status"], **(e.get("kpis") or {})})
+    board = pd.DataFrame(rows)
+    if "summary_score" in board:
+        board = board.sort_values(["scenario", "summary_score"], ascending=[True, False], na_position="last")
+    board.to_csv(out / "leaderboard.csv", index=False)
+    cols = [c for c in ("scenario", "seed", "method", "status", "summary_score", "fpr_standard_thr",
+                        "fnr_standard_thr", "fcr", "delay_censored_mean", "robustness") if c in board]
+    (out / "leaderboard.md").write_text("# Leaderboard\n\nRanked by summary score (null method = 0, perfect = 100; "
+                                        "docs/scoring.md).\n\n" + to_markdown(board[cols].round(3)) + "\n")
+    return board
