@@ -154,7 +154,8 @@ def window_mean(stack: np.ndarray) -> np.ndarray:
 
 
 def cross_fit_folds(n: int, cv: Any, rng: np.random.Generator,
-                    owner: str, groups: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+                    owner: str, groups: np.ndarray | None = None,
+                    min_train: int = 1) -> list[tuple[np.ndarray, np.ndarray]]:
     """Train/held-out splits of ``n`` training flights for out-of-fold scores.
 
     Parameters
@@ -164,7 +165,8 @@ def cross_fit_folds(n: int, cv: Any, rng: np.random.Generator,
     cv : {"units", "loo"}, int >= 2 or None
         ``"units"``: leave one unit out (one split per distinct ``groups`` value, so
         held-out flights come from a unit the model never saw, like a new engine;
-        falls back to ``"loo"`` when ``groups`` is None or has fewer than 3 units);
+        falls back to ``"loo"`` when ``groups`` is None, has fewer than 3 units, or
+        leaving a unit out would leave fewer than ``min_train`` training flights);
         ``"loo"``: leave one flight out (``n`` splits, no randomness); int ``k``:
         ``k`` folds of a random permutation drawn from ``rng``; None: a single
         in-sample "split" (train = held-out = all flights).
@@ -174,6 +176,8 @@ def cross_fit_folds(n: int, cv: Any, rng: np.random.Generator,
         Class name for error messages.
     groups : ndarray of shape (n,), optional
         Unit of each flight (for ``"units"``).
+    min_train : int, default=1
+        Fewest training flights a ``"units"`` fold may have.
 
     Returns
     -------
@@ -191,7 +195,9 @@ def cross_fit_folds(n: int, cv: Any, rng: np.random.Generator,
     if cv == "units":
         if groups is not None and len(np.unique(groups)) >= 3:
             uniq = list(dict.fromkeys(groups.tolist()))
-            return [(everything[groups != g], everything[groups == g]) for g in uniq]
+            folds = [(everything[groups != g], everything[groups == g]) for g in uniq]
+            if min(len(train) for train, _ in folds) >= min_train:
+                return folds
         cv = "loo"
     k = n if cv == "loo" else int(cv)
     if n < max(k, 2):

@@ -91,7 +91,8 @@ class PaperMahalanobis(BaseMethod):
         ``"units"`` leave-one-unit-out (one healthy model per training unit,
         scoring that unit's flights: the scores are distributed like those of a
         new engine, unit-to-unit dispersion included; falls back to ``"loo"``
-        without ``unit_id`` or with fewer than 3 units), ``"loo"``
+        without ``unit_id``, with fewer than 3 units, or when leaving a unit out
+        leaves fewer flights than a 10-indicator model needs (11)), ``"loo"``
         leave-one-flight-out (one model per flight; other flights of the same
         unit stay in training, so the threshold ignores unit-to-unit dispersion:
         on paper_2012 it gave 33 % false alarms on new units instead of ~6 %),
@@ -174,7 +175,7 @@ class PaperMahalanobis(BaseMethod):
 
         # Out-of-fold Z-scores, and which fold model produced each of them.
         groups = healthy_indicators["unit_id"].to_numpy() if "unit_id" in healthy_indicators else None
-        folds = cross_fit_folds(n, self.cv, rng, owner, groups)
+        folds = cross_fit_folds(n, self.cv, rng, owner, groups, min_train=x.shape[1] + 1)
         z_oof = np.full_like(x, np.nan)
         fold_of = np.empty(n, dtype=np.int64)
         fold_models = []

@@ -7,7 +7,6 @@ import time
 
 import numpy as np
 import pytest
-import yaml
 
 from fuelhm_bench.cli import main
 from fuelhm_bench.errors import MethodError
@@ -15,32 +14,11 @@ from fuelhm_bench.evaluation import load_method, parse_params, run_method, scena
 from fuelhm_bench.methods import BaseMethod, Decision
 
 
-def tiny_scenario(tmp_path, name="tiny", base="paper_2012"):
-    """A shipped scenario shrunk: 3 test units x 8 flights, 4 x 4 healthy training flights, 5-minute flights."""
-    from fuelhm_bench.scenarios import shipped_scenario_files
-
-    files = shipped_scenario_files()
-    src = files[base] if isinstance(files, dict) else next(p for p in files if f"{base}.yaml" in str(p))
-    data = yaml.safe_load(open(src))
-    data["name"] = name
-    data["fleet"]["units"] = 3
-    data["fleet"]["flights_per_unit"] = 8
-    data["mission"]["duration_min"] = 5.0
-    data["training"]["units"] = 4
-    data["training"]["flights_per_unit"] = 4
-    for d in data["degradations"]:
-        d["onset_min"], d["onset_max"], d["ramp_flights"] = 1, 2, 3
-    data["healthy_probability"] = 0.0
-    data["degradations"][0]["probability"] = 0.5
-    data["degradations"][1]["probability"] = 0.5
-    path = tmp_path / f"{name}.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
-
-
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    path = tiny_scenario(tmp_path_factory.mktemp("sc"))
+    from conftest import _tiny_scenario
+
+    path = _tiny_scenario(tmp_path_factory.mktemp("sc"))
     data, _ = scenario_data(path, doe_units=1)
     return path, data
 
@@ -128,7 +106,7 @@ def test_paper_command_small(tiny, tmp_path, capsys):
     assert "Where and why the numbers differ" in (out / "report.md").read_text()
 
 
-def test_evaluate_reports_robustness_under_drift(tmp_path):
+def test_evaluate_reports_robustness_under_drift(tmp_path, tiny_scenario):
     path = tiny_scenario(tmp_path, "tinydrift", base="robustness_drift")
     out = tmp_path / "eval"
     assert main(["evaluate", "--method", "baselines.paper_mahalanobis:PaperMahalanobis", "--scenario", str(path),
