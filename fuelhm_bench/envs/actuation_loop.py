@@ -1,0 +1,580 @@
+"""``FuelHM/ActuationLoop-v0``: the health monitoring of one actuation loop, flight by flight."""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.error import ResetNeeded
+
+from fuelhm_bench.envs._validation import did_you_mean, reject_unknown
+from fuelhm_bench.envs.cache import KnowledgeSize, resolve_scenario, surrogate_knowledge
+from fuelhm_bench.envs.surrogate import SurrogateModel
+from fuelhm_bench.errors import DataFormatError, ParameterError
+from fuelhm_bench.flights.fleet import _STREAM_MISSION, _STREAM_NOISE, _STREAM_UNIT, build_units, rng_for
+from fuelhm_bench.flights.schedule import draw_unit_schedule
+from fuelhm_bench.taxonomy import INDICATOR_NAMES, INDICATOR_UNITS, MODE_IDS
+
+__all__ = ["ActuationLoopEnv", "FIDELITIES", "INDICATOR_BOUNDS", "RAW_BOUNDS"]
+
+#: Simulation fidelities of the environment.
+FIDELITIES: tuple[str, ...] = ("physics", "surrogate")
+
+#: Bounds of the ``"indicators"`` observation, per indicator, in ``INDICATOR_UNITS``
+#: (currents in mA inside the extraction's +/-12 mA current bins; velocities in mm/s;
+#: gains in mm/s/mA). Values outside (never seen in the shipped scenarios) are clipped.
+INDICATOR_BOUNDS: dict[str, tuple[float, float]] = {
+    "X1": (-12.0, 12.0), "Y1": (-1000.0, 1000.0), "X2": (-12.0, 12.0), "Y2": (-1000.0, 1000.0),
+    "Inb": (-12.0, 12.0), "I0": (-12.0, 12.0), "Hys0": (0.0, 12.0),
+    "G_in": (-1000.0, 1000.0), "G_out": (-1000.0, 1000.0), "G_null": (-1000.0, 1000.0),
+}
+
+#: Bounds of the ``"raw"`` observation rows: control current [mA] and LVDT position [mm].
+RAW_BOUNDS: dict[str, tuple[float, float]] = {"current_mA": (-50.0, 50.0), "position_mm": (-20.0, 80.0)}
+
+_STREAM_SURROGATE = 20  # fleet streams are 0-2, DOE streams 10-12
+_N_MODES = len(MODE_IDS)
+_ALL = (1 << _N_MODES) - 1
+_BITS = np.array([1 << j for j in range(_N_MODES)], dtype=np.int64)
+_LOW = np.array([INDICATOR_BOUNDS[n][0] for n in INDICATOR_NAMES], dtype=np.float32)
+_HIGH = np.array([INDICATOR_BOUNDS[n][1] for n in INDICATOR_NAMES], dtype=np.float32)
+_ARGUMENTS = ("scenario", "fidelity", "maintenance", "drifted", "flight_minutes", "raw", "raw_samples",
+              "knowledge", "knowledge_size", "cache_dir", "render_mode")
+_OPTIONS = ("unit", "evaluation")
+
+
+def _bitmask(flags: np.ndarray) -> list[int]:
+    """Row-wise bitmask (bit j = column j) of a boolean matrix, as Python ints."""
+    return [int(v) for v in (flags.astype(np.int64) * _BITS).sum(axis=1)]
+
+
+class ActuationLoopEnv(gym.Env):
+    """Health monitoring of a fuel-system actuation loop: one episode is one unit's life, one step one flight.
+
+    ## Description
+
+    A unit (servovalve + cylinder + LVDT in the FADEC's position loop) of a
+    scenario's scored fleet flies ``fleet.flights_per_unit`` flights while its
+    degradations (paper Table III) start and grow according to the scenario's
+    schedule. After each flight the on-board computer extracts the ten
+    indicators of the paper's Table I from the velocity-gain curve; the agent
+    sees them and decides whether to remove the unit for maintenance (alarm)
+    and which mode it blames (guilt). Rewards are the scenario's costs
+    (``costs`` section, kUSD). With ``fidelity="physics"`` every flight is
+    simulated (numba integrator, the scenario's truth model with its hidden
+    effects and drift) and the indicators are extracted from the recorded
+    current and position, exactly as :func:`fuelhm_bench.datasets.fleet_indicators`
+    does; with ``fidelity="surrogate"`` they are drawn from a healthy Gaussian
+    model of the scored fleet (split into a per-unit and a per-flight part) and
+    shifted by the published indicator transformation laws (paper eq. 4,
+    :class:`~fuelhm_bench.envs.surrogate.SurrogateModel`; inputs from
+    :func:`~fuelhm_bench.envs.cache.surrogate_knowledge`, cached), thousands of
+    times faster.
+
+    ## Action Space
+
+    ``Dict({"alarm": Discrete(2), "guilt": Box(0, 1, (7,), float32)})``
+
+    | key     | space               | meaning                                                        |
+    |---------|---------------------|----------------------------------------------------------------|
+    | alarm   | Discrete(2)         | 1: remove the unit for maintenance after this flight; 0: keep it flying |
+    | guilt   | Box(0, 1, (7,))     | guilt of each mode of ``MODE_IDS`` (filter_contamination, null_bias_drift, backlash, spool_friction, radial_clearance, internal_leakage, diaphragm_clogging) |
+
+    The alarm is the only decision that changes the world (reward and, with
+    ``maintenance=True``, the unit), so it is a discrete choice an agent can
+    learn directly; guilt mirrors :class:`fuelhm_bench.methods.Decision`
+    (a probability per mode, the paper's collinearity guilt) so that a method
+    of the common interface maps onto an action without loss. A Box cannot
+    say "sums to 1": the environment only requires each entry in [0, 1]; the
+    runner (:mod:`fuelhm_bench.runner`) records the guilt for the diagnosis
+    KPIs. Guilt does not enter the reward in v0. An action outside the space
+    raises :class:`~fuelhm_bench.errors.ParameterError` naming the space.
+
+    ## Observation Space
+
+    ``Dict({"indicators": Box(low, high, (10,), float32), "valid": MultiBinary(10)})``,
+    plus ``"raw": Box((2, raw_samples), float32)`` when ``raw=True``.
+
+    | index | indicator | unit    | low   | high | meaning (paper Table I)                          |
+    |-------|-----------|---------|-------|------|--------------------------------------------------|
+    | 0     | X1        | mA      | -12   | 12   | current of the inlet slope change                |
+    | 1     | Y1        | mm/s    | -1000 | 1000 | velocity at X1                                   |
+    | 2     | X2        | mA      | -12   | 12   | current of the outlet slope change               |
+    | 3     | Y2        | mm/s    | -1000 | 1000 | velocity at X2                                   |
+    | 4     | Inb       | mA      | -12   | 12   | (X1 + X2) / 2                                    |
+    | 5     | I0        | mA      | -12   | 12   | mean control current at rest (v = 0)             |
+    | 6     | Hys0      | mA      | 0     | 12   | spread of the control current at rest            |
+    | 7     | G_in      | mm/s/mA | -1000 | 1000 | gain of the inlet segment                        |
+    | 8     | G_out     | mm/s/mA | -1000 | 1000 | gain of the outlet segment                       |
+    | 9     | G_null    | mm/s/mA | -1000 | 1000 | gain of the null segment                         |
+
+    ``valid[i]`` is 1 when indicator ``i`` was extracted, 0 when the flight's
+    data did not support it; an invalid indicator is reported as 0 in
+    ``"indicators"`` (never NaN). Values are clipped to the bounds (shipped
+    scenarios stay well inside). ``"raw"`` (physics only) is the recorded
+    flight resampled by linear interpolation to ``raw_samples`` equally spaced
+    instants from the first to the last sample: row 0 the control current [mA]
+    in [-50, 50], row 1 the LVDT position [mm] in [-20, 80]. The ground truth
+    (intensities, onsets) is never part of the observation.
+
+    ## Rewards
+
+    The reward of step ``t`` is minus the cost, in kUSD, of the decision on
+    flight ``t`` (the flight shown in the observation), from the scenario's
+    ``costs``. A fault is *detectable* on a flight when one of its modes has an
+    intensity >= ``detectable_fraction`` x that mode's ``max_intensity``; it
+    causes an *in-flight failure* on the flight where it reaches
+    ``failure_fraction`` x ``max_intensity``.
+
+    | decision on flight t                  | reward                                                        |
+    |---------------------------------------|---------------------------------------------------------------|
+    | alarm, detectable fault present       | ``-repair_kusd`` (correct maintenance)                        |
+    | alarm, no detectable fault            | ``-false_alarm_kusd`` (removal, no fault found)               |
+    | no alarm, detectable fault present    | ``-undetected_flight_kusd`` (flight flown with an undetected fault) |
+    | no alarm, no detectable fault         | 0                                                             |
+    | a fault reached failure on flight t   | additionally ``-failure_kusd`` (delay / cancellation)         |
+
+    The episode return is minus the total cost of the unit's life. A failure
+    on flight ``t`` could only have been prevented by an alarm on an earlier
+    flight (credit assignment spans at least one step).
+
+    ## Maintenance
+
+    ``maintenance=True`` (default, for control): a correct maintenance (alarm
+    with a detectable fault present) or an in-flight failure repairs the unit
+    after the flight: every mode active on that flight is removed and does not
+    recur in the episode (modes scheduled to start later still do). A false
+    alarm changes nothing. ``maintenance=False`` (for the paper's KPIs, and
+    what :mod:`fuelhm_bench.runner` uses): alarms are only scored, faults
+    evolve as scheduled whatever the agent does, and each mode's failure is
+    charged once, on the first flight where it reaches ``failure_fraction``.
+
+    ## Starting State
+
+    ``reset()`` starts a new unit drawn from the scenario's scored-fleet
+    distributions (manufacturing dispersion, which modes occur, their onsets)
+    with the environment's own generator ``self.np_random``;
+    ``reset(options={"unit": k})`` replays unit ``k`` of the scenario's scored
+    fleet instead (0 <= k < ``fleet.units``), fixed by the scenario's test seed
+    whatever the environment's seed: with the physics fidelity its indicators
+    are those of :func:`fuelhm_bench.datasets.fleet_indicators` on
+    ``Scenario.test_fleet_config()``. The first observation is the first
+    flight's; ``info`` holds ``"flight_index"`` (0) and ``"unit"`` (``k``, or -1
+    for a drawn unit).
+
+    ## Episode End
+
+    The episode terminates (``terminated=True``) after the decision on the
+    last flight: the unit retires and no cost follows (``truncated`` is always
+    False). The observation returned then repeats the last flight's (no new
+    flight is flown). The ground truth of the whole episode is returned once,
+    in that step's ``info["episode_truth"]``: ``unit_id``, ``flight_index``
+    (n,), ``intensity`` (n, 7, flown, after repairs), ``max_intensity`` (7,),
+    ``onset`` (7,; -1 for absent modes), ``detectable``, ``failure``,
+    ``repaired`` (n,) and ``cost_kusd`` (n,). With
+    ``reset(options={"evaluation": True})`` every ``info`` also carries
+    ``"truth"`` for the flight in the observation (``intensity``,
+    ``max_intensity``, ``onset``, ``detectable``, ``failure``) and every step's
+    ``info["cost_kusd"]`` the breakdown of its reward; the runner strips them
+    before anything reaches a method.
+
+    ## Arguments
+
+    ```python
+    import gymnasium as gym
+    import fuelhm_bench.envs
+    env = gym.make("FuelHM/ActuationLoop-v0", scenario="all_modes", fidelity="surrogate")
+    ```
+
+    | argument        | default        | meaning                                                                     |
+    |-----------------|----------------|-----------------------------------------------------------------------------|
+    | scenario        | "paper_2012"   | shipped scenario name (``"all_modes"``, ``"all_modes-v1"``), YAML path or Scenario |
+    | fidelity        | None           | "physics" or "surrogate"; None: the scenario's ``fidelity``                 |
+    | maintenance     | True           | alarms repair the unit (see Maintenance)                                    |
+    | drifted         | True           | the scored fleet carries the scenario's nominal-parameter drift (False: the same fleet without it) |
+    | flight_minutes  | None           | flight duration [min] overriding the scenario's (>= start + 1 min); short flights make tests fast |
+    | raw             | False          | add the resampled raw flight to the observation (physics only)              |
+    | raw_samples     | 256            | samples per raw row, in [2, 100000]                                         |
+    | knowledge       | None           | a precomputed :class:`~fuelhm_bench.knowledge.KnowledgeResult` the surrogate draws from (its ``healthy_model``, ``healthy_table``, ``itl``); None: :func:`~fuelhm_bench.envs.cache.surrogate_knowledge` |
+    | knowledge_size  | None           | :class:`~fuelhm_bench.envs.KnowledgeSize` (or a dict of its fields) of that build; ``KnowledgeSize.small()`` for tests |
+    | cache_dir       | None           | cache of the simulated products; None: ``$FUELHM_BENCH_CACHE`` or ``~/.cache/fuelhm-bench``; False: memory only |
+    | render_mode     | None           | no rendering is implemented                                                  |
+
+    A misspelt argument or option raises
+    :class:`~fuelhm_bench.errors.ParameterError` with a did-you-mean; an
+    unknown scenario :class:`~fuelhm_bench.errors.UnknownNameError`.
+
+    ## Version History
+
+    * v0: initial version (surrogate with unit/flight variance split; guilt not rewarded).
+
+    Attributes
+    ----------
+    scenario : Scenario
+        The loaded scenario.
+    fidelity : str
+        The fidelity in use.
+    n_flights : int
+        Flights per episode (the scenario's ``fleet.flights_per_unit``).
+    surrogate : SurrogateModel or None
+        The surrogate (surrogate fidelity only).
+    """
+
+    metadata = {"render_modes": [], "render_fps": 1}
+
+    def __init__(self, *, scenario="paper_2012", fidelity: str | None = None, maintenance: bool = True,
+                 drifted: bool = True, flight_minutes: float | None = None, raw: bool = False, raw_samples: int = 256, knowledge=None,
+                 knowledge_size=None, cache_dir: str | os.PathLike | bool | None = None,
+                 render_mode: str | None = None, **unknown: Any) -> None:
+        owner = type(self).__name__
+        reject_unknown(unknown, _ARGUMENTS, what="argument", owner=owner)
+        self.scenario = resolve_scenario(scenario)
+        sc = self.scenario
+        if fidelity is None:
+            fidelity = sc.fidelity
+        if fidelity not in FIDELITIES:
+            raise ParameterError(f"The 'fidelity' parameter of {owner} must be one of {', '.join(FIDELITIES)} or None "
+                                 f"(the scenario's default). Got {fidelity!r} instead.{did_you_mean(fidelity, FIDELITIES)}")
+        self.fidelity = fidelity
+        for name, value in (("maintenance", maintenance), ("drifted", drifted), ("raw", raw)):
+            if not isinstance(value, (bool, np.bool_)):
+                raise ParameterError(f"The '{name}' parameter of {owner} must be a bool. Got {value!r} instead.")
+        self.maintenance = bool(maintenance)
+        self.drifted = bool(drifted)
+        self.raw = bool(raw)
+        if not (isinstance(raw_samples, (int, np.integer)) and not isinstance(raw_samples, bool)
+                and 2 <= raw_samples <= 100_000):
+            raise ParameterError(f"The 'raw_samples' parameter of {owner} must be an int in [2, 100000]. "
+                                 f"Got {raw_samples!r} instead.")
+        self.raw_samples = int(raw_samples)
+        if self.raw and fidelity != "physics":
+            raise ParameterError(f"The 'raw' parameter of {owner} may only be True with fidelity='physics' (the "
+                                 f"surrogate draws indicators, not flights). Got raw=True with fidelity={fidelity!r}.")
+        shortest = (sc.mission.start_duration_s + 60.0) / 60.0
+        if flight_minutes is not None and not (
+                isinstance(flight_minutes, (int, float, np.integer, np.floating)) and not isinstance(flight_minutes, bool)
+                and math.isfinite(flight_minutes) and flight_minutes >= shortest):
+            raise ParameterError(f"The 'flight_minutes' parameter of {owner} must be None or a number >= "
+                                 f"{shortest:g} (engine start {sc.mission.start_duration_s:g} s + 60 s). "
+                                 f"Got {flight_minutes!r} instead.")
+        self.flight_minutes = None if flight_minutes is None else float(flight_minutes)
+        if render_mode is not None:
+            raise ParameterError(f"The 'render_mode' parameter of {owner} must be None (no rendering is "
+                                 f"implemented). Got {render_mode!r} instead.")
+        self.render_mode = None
+        size = KnowledgeSize.coerce(knowledge_size, owner)
+        if knowledge is not None and not all(hasattr(knowledge, a) for a in ("healthy_model", "healthy_table", "itl")):
+            raise ParameterError(f"The 'knowledge' parameter of {owner} must be a KnowledgeResult or None. "
+                                 f"Got {type(knowledge).__name__} instead.")
+
+        import dataclasses
+
+        config = sc.test_fleet_config()
+        if not self.drifted:
+            config = dataclasses.replace(config, nominal=sc.truth_model())
+        if self.flight_minutes is not None:
+            config = dataclasses.replace(config, mission=dataclasses.replace(
+                config.mission, duration_s=60.0 * self.flight_minutes))
+        self._config = config
+        self.n_flights = config.n_flights
+        self._fleet = None  # the scored fleet's units, built on the first replay
+        costs = sc.costs
+        self._c_false, self._c_repair = float(costs.false_alarm_kusd), float(costs.repair_kusd)
+        self._c_undetected, self._c_failure = float(costs.undetected_flight_kusd), float(costs.failure_kusd)
+        self.surrogate = None
+        if fidelity == "surrogate":
+            if knowledge is None:
+                knowledge = surrogate_knowledge(sc, flight_minutes=self.flight_minutes, size=size,
+                                                drifted=self.drifted, cache_dir=cache_dir)
+            self.surrogate = SurrogateModel.from_knowledge(knowledge)
+
+        obs = {"indicators": spaces.Box(_LOW, _HIGH, (len(INDICATOR_NAMES),), np.float32),
+               "valid": spaces.MultiBinary(len(INDICATOR_NAMES))}
+        if self.raw:
+            low = np.repeat(np.array([[RAW_BOUNDS["current_mA"][0]], [RAW_BOUNDS["position_mm"][0]]],
+                                     dtype=np.float32), self.raw_samples, axis=1)
+            high = np.repeat(np.array([[RAW_BOUNDS["current_mA"][1]], [RAW_BOUNDS["position_mm"][1]]],
+                                      dtype=np.float32), self.raw_samples, axis=1)
+            obs["raw"] = spaces.Box(low, high, (2, self.raw_samples), np.float32)
+        self.observation_space = spaces.Dict(obs)
+        self.action_space = spaces.Dict({"alarm": spaces.Discrete(2),
+                                         "guilt": spaces.Box(0.0, 1.0, (_N_MODES,), np.float32)})
+        self._t = -1  # no episode yet
+        self._valid_ones = np.ones(len(INDICATOR_NAMES), dtype=np.int8)
+
+    # ------------------------------------------------------------------ episode set-up
+    def _scored_fleet(self):
+        if self._fleet is None:
+            self._fleet = build_units(self._config)
+        return self._fleet
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start a unit's life and return the first flight's observation and info.
+
+        Parameters
+        ----------
+        seed : int or None, default=None
+            Seeds ``self.np_random`` (the only source of randomness of drawn units).
+        options : dict or None, default=None
+            ``"unit"``: int, replay that unit of the scored fleet;
+            ``"evaluation"``: bool, add the ground truth to every ``info``.
+
+        Returns
+        -------
+        observation : dict
+        info : dict
+        """
+        super().reset(seed=seed)
+        options = {} if options is None else options
+        if not isinstance(options, dict):
+            raise ParameterError(f"The 'options' parameter of {type(self).__name__}.reset must be a dict or None. "
+                                 f"Got {type(options).__name__} instead.")
+        reject_unknown(options, _OPTIONS, what="option", owner=f"{type(self).__name__}.reset")
+        evaluation = options.get("evaluation", False)
+        if not isinstance(evaluation, (bool, np.bool_)):
+            raise ParameterError(f"The 'evaluation' option of {type(self).__name__}.reset must be a bool. "
+                                 f"Got {evaluation!r} instead.")
+        self._evaluation = bool(evaluation)
+        unit = options.get("unit")
+        config = self._config
+        n = self.n_flights
+        if unit is None:
+            schedule = draw_unit_schedule(config.schedules, self.np_random, simultaneous=config.simultaneous)
+            key = int(self.np_random.integers(0, 2**63 - 1))
+            self._unit_id, self._seed, self._slot, self._model = -1, key, 0, None
+        else:
+            if not (isinstance(unit, (int, np.integer)) and not isinstance(unit, bool) and 0 <= unit < config.n_units):
+                raise ParameterError(f"The 'unit' option of {type(self).__name__}.reset must be an int in "
+                                     f"[0, {config.n_units - 1}] (a unit of the scored fleet of {self.scenario.id}). "
+                                     f"Got {unit!r} instead.")
+            fleet_unit = self._scored_fleet()[int(unit)]
+            schedule = fleet_unit.schedule
+            self._unit_id, self._seed, self._slot, self._model = int(unit), config.seed, int(unit), fleet_unit.model
+        # Truth: scheduled intensities, thresholds, per-flight bitmasks.
+        intensity = np.zeros((n, _N_MODES))
+        max_intensity = np.zeros(_N_MODES)
+        onset = np.full(_N_MODES, -1, dtype=np.int64)
+        flights = np.arange(n)
+        for s, o in zip(schedule.schedules, schedule.onsets):
+            j = MODE_IDS.index(s.mode)
+            intensity[:, j] = s.intensity(flights, o)
+            max_intensity[j], onset[j] = s.max_intensity, o
+        costs = self.scenario.costs
+        present = intensity > 0.0
+        self._schedule = schedule
+        self._intensity, self._max, self._onset = intensity, max_intensity, onset
+        self._present_bits = _bitmask(present)
+        self._det_bits = _bitmask(present & (intensity >= costs.detectable_fraction * max_intensity))
+        self._fail_bits = _bitmask(present & (intensity >= costs.failure_fraction * max_intensity))
+        self._active, self._failed = _ALL, 0
+        self._active_log, self._fail_log, self._repair_log, self._cost_log = [], [], [], []
+        if self.fidelity == "surrogate":
+            rng = rng_for(self._seed, _STREAM_SURROGATE, self._slot)
+            self._healthy = self.surrogate.healthy(rng, n)
+            self._table = np.clip(self.surrogate.indicators(self._healthy, intensity), _LOW, _HIGH).astype(np.float32)
+        elif self._model is None:
+            from fuelhm_bench.physics.model import manufacture
+
+            self._model = manufacture(config.nominal, rng_for(self._seed, _STREAM_UNIT, self._slot), config.dispersion)
+        self._t = 0
+        obs = self._observe(0)
+        info = {"flight_index": 0, "unit": self._unit_id}
+        if self._evaluation:
+            info["truth"] = self._flight_truth(0)
+        return obs, info
+
+    # ------------------------------------------------------------------ flights
+    def _observe(self, t: int) -> dict:
+        """Fly flight ``t`` (physics) or read it (surrogate); log the unit's state during it."""
+        self._active_log.append(self._active)
+        if self.surrogate is not None:
+            return {"indicators": self._table[t].copy(), "valid": self._valid_ones.copy()}
+        self._last = self._fly(t)
+        return {k: v.copy() for k, v in self._last.items()}
+
+    def _fly(self, t: int) -> dict:
+        from fuelhm_bench.indicators import extract_indicators
+        from fuelhm_bench.indicators.result import IndicatorResult
+        from fuelhm_bench.physics.simulate import simulate
+
+        active = self._active
+        intens = {s.mode: (float(self._intensity[t, MODE_IDS.index(s.mode)])
+                           if active >> MODE_IDS.index(s.mode) & 1 else 0.0)
+                  for s in self._schedule.schedules}
+        model = self._model.degraded(intens)
+        inputs = self._config.mission.sample(rng_for(self._seed, _STREAM_MISSION, self._slot, t))
+        noise = rng_for(self._seed, _STREAM_NOISE, self._slot, t)
+        where = f"unit {self._unit_id}, flight {t}" if self._unit_id >= 0 else f"drawn unit, flight {t}"
+        out = simulate([model], [inputs], [noise], labels=[where])[0]
+        current_ma = out.current_a * 1e3
+        position_mm = out.measured_position_m * 1e3
+        try:
+            result = extract_indicators(out.time_s, current_ma, position_mm, flight_id=t)
+        except DataFormatError as exc:
+            result = IndicatorResult.invalid((str(exc),))
+        values = np.array([result.values[n] for n in INDICATOR_NAMES], dtype=np.float64)
+        valid = np.array([result.valid[n] for n in INDICATOR_NAMES], dtype=np.int8)
+        values = np.clip(np.where(valid == 1, values, 0.0), _LOW, _HIGH).astype(np.float32)
+        obs = {"indicators": values, "valid": valid}
+        if self.raw:
+            grid = np.linspace(out.time_s[0], out.time_s[-1], self.raw_samples)
+            raw = np.stack([np.interp(grid, out.time_s, current_ma), np.interp(grid, out.time_s, position_mm)])
+            low, high = self.observation_space["raw"].low, self.observation_space["raw"].high
+            obs["raw"] = np.clip(raw, low, high).astype(np.float32)
+        return obs
+
+    def _mask(self, bits: int) -> np.ndarray:
+        return ((bits & _BITS) != 0).astype(np.float64)
+
+    def _flight_truth(self, t: int) -> dict:
+        active = self._active
+        return {"intensity": self._intensity[t] * self._mask(active), "max_intensity": self._max.copy(),
+                "onset": self._onset.copy(), "detectable": bool(self._det_bits[t] & active),
+                "failure": bool(self._fail_bits[t] & active & ~self._failed)}
+
+    # ------------------------------------------------------------------ step
+    def _action_error(self, problem: str) -> ParameterError:
+        return ParameterError(f"The action passed to {type(self).__name__}.step must be in the action space "
+                              f"{self.action_space} (alarm: 0 or 1; guilt: 7 numbers in [0, 1], one per mode of "
+                              f"MODE_IDS). Got {problem} instead.")
+
+    def _alarm_of(self, action) -> bool:
+        """Check ``action`` against the action space (fast path) and return the alarm."""
+        try:
+            alarm, guilt = action["alarm"], action["guilt"]
+        except (TypeError, KeyError, IndexError):
+            raise self._action_error(f"{type(action).__name__} {action!r:.100}") from None
+        if len(action) != 2:
+            extra = [k for k in action if k not in ("alarm", "guilt")]
+            raise self._action_error(f"the extra key(s) {extra}")
+        if isinstance(alarm, (int, np.integer, np.bool_)):
+            value = int(alarm)
+        elif isinstance(alarm, np.ndarray) and alarm.shape == () and alarm.dtype.kind in "biu":
+            value = int(alarm)
+        else:
+            raise self._action_error(f"alarm={alarm!r} ({type(alarm).__name__})")
+        if value != 0 and value != 1:
+            raise self._action_error(f"alarm={value!r}")
+        g = guilt if type(guilt) is np.ndarray else np.asarray(guilt)
+        if g.shape != (_N_MODES,) or g.dtype.kind not in "biuf":
+            raise self._action_error(f"guilt of shape {g.shape} and dtype {g.dtype}")
+        if not (g.min() >= 0.0 and g.max() <= 1.0):
+            raise self._action_error(f"guilt={g.tolist()} (entries outside [0, 1] or NaN)")
+        return value == 1
+
+    def step(self, action):
+        """Decide on the current flight, fly the next one.
+
+        Parameters
+        ----------
+        action : dict
+            ``{"alarm": 0 or 1, "guilt": array of 7 floats in [0, 1]}``.
+
+        Returns
+        -------
+        observation : dict
+            The next flight's (the last flight's again at the end).
+        reward : float
+            Minus the cost of the decision [kUSD] (see Rewards).
+        terminated : bool
+            True after the decision on the last flight.
+        truncated : bool
+            Always False.
+        info : dict
+            ``"flight_index"`` of the observation; ``"episode_truth"`` at the end;
+            ``"truth"`` and ``"cost_kusd"`` with the evaluation option.
+
+        Raises
+        ------
+        ParameterError
+            The action is outside the action space.
+        gymnasium.error.ResetNeeded
+            No episode is running (call ``reset``).
+        """
+        t = self._t
+        if t < 0:
+            raise ResetNeeded(f"{type(self).__name__}.step was called without a running episode; call reset() "
+                              f"first (an episode ends after the decision on its last flight).")
+        alarm = self._alarm_of(action)
+        active = self._active
+        detectable = self._det_bits[t] & active
+        failure = self._fail_bits[t] & active & ~self._failed
+        if alarm:
+            cost = self._c_repair if detectable else self._c_false
+        else:
+            cost = self._c_undetected if detectable else 0.0
+        if failure:
+            cost += self._c_failure
+        repaired = 0
+        if self.maintenance:
+            if (alarm and detectable) or failure:
+                repaired = self._present_bits[t] & active
+                if repaired:
+                    self._repair(t, repaired)
+        elif failure:
+            self._failed |= failure
+        self._fail_log.append(failure)
+        self._repair_log.append(repaired)
+        self._cost_log.append(cost)
+        t += 1
+        reward = -cost if cost else 0.0
+        if t == self.n_flights:
+            self._t = -1
+            if self.surrogate is not None:
+                obs = {"indicators": self._table[t - 1].copy(), "valid": self._valid_ones.copy()}
+            else:
+                obs = {k: v.copy() for k, v in self._last.items()}
+            info = {"flight_index": t - 1, "episode_truth": self._episode_truth()}
+            terminated = True
+        else:
+            self._t = t
+            obs = self._observe(t)
+            info = {"flight_index": t}
+            terminated = False
+        if self._evaluation:
+            info["cost_kusd"] = self._breakdown(alarm, detectable, failure)
+            if not terminated:
+                info["truth"] = self._flight_truth(t)
+        return obs, reward, terminated, False, info
+
+    def _breakdown(self, alarm: bool, detectable: int, failure: int) -> dict:
+        return {"repair": self._c_repair if alarm and detectable else 0.0,
+                "false_alarm": self._c_false if alarm and not detectable else 0.0,
+                "undetected_flight": self._c_undetected if not alarm and detectable else 0.0,
+                "failure": self._c_failure if failure else 0.0}
+
+    def _repair(self, t: int, repaired: int) -> None:
+        """Remove the repaired modes from flight ``t + 1`` on (surrogate: recompute the remaining table)."""
+        self._active &= ~repaired
+        if self.surrogate is not None and t + 1 < self.n_flights:
+            rest = self._intensity[t + 1:] * self._mask(self._active)
+            self._table[t + 1:] = np.clip(self.surrogate.indicators(self._healthy[t + 1:], rest),
+                                          _LOW, _HIGH).astype(np.float32)
+
+    def _episode_truth(self) -> dict:
+        n = self.n_flights
+        active = np.array(self._active_log, dtype=np.int64)[:, None]
+        flown = self._intensity * ((active & _BITS) != 0)
+        return {
+            "unit_id": self._unit_id,
+            "flight_index": np.arange(n, dtype=np.int64),
+            "intensity": flown,
+            "max_intensity": self._max.copy(),
+            "onset": self._onset.copy(),
+            "detectable": np.array([bool(d & a) for d, a in zip(self._det_bits, self._active_log)]),
+            "failure": np.array([f != 0 for f in self._fail_log]),
+            "repaired": np.array([r != 0 for r in self._repair_log]),
+            "cost_kusd": np.array(self._cost_log, dtype=np.float64),
+        }
+
+    def render(self) -> None:
+        """No rendering is implemented (``render_modes`` is empty)."""
+        return None
+
+    def __repr__(self) -> str:
+        return (f"<{type(self).__name__} scenario={self.scenario.id} fidelity={self.fidelity} "
+                f"maintenance={self.maintenance}>")

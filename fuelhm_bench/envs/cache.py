@@ -1,0 +1,433 @@
+"""Simulated data products of a scenario, built once and cached (in memory and on disk).
+
+The environments and the runner need, for a scenario:
+
+* the **published knowledge** (:func:`published_knowledge`): the healthy model,
+  ITL and signatures that :func:`fuelhm_bench.evaluation.scenario_data` builds
+  from the benchmark's own simulations of the published model
+  (:meth:`KnowledgeBuild.from_scenario <fuelhm_bench.knowledge.KnowledgeBuild.from_scenario>`);
+* **healthy indicator tables** of the scenario's training fleet
+  (:func:`training_indicators`): what methods are fitted on, and, continued to
+  more units and flights and with the scored fleet's drift, what the
+  surrogate's healthy Gaussian model is learnt on (:func:`surrogate_knowledge`).
+
+Each costs from seconds to tens of seconds of simulation. They are kept
+
+* in memory, per process, keyed by a SHA-256 (:func:`cache_key`);
+* on disk, under ``<cache dir>/fuelhm-v1/<kind>-<scenario id>-<key[:16]>/``:
+  the simulated tables as Parquet and ``meta.json``. Fitted objects (healthy
+  model, ITL, signatures) are refitted from the tables on load (milliseconds,
+  deterministic), so the cache holds data only, never pickled code.
+
+The key covers the kind of product, the scenario's content (every field of
+:meth:`Scenario.to_dict <fuelhm_bench.scenarios.Scenario>` except
+``description``), the effective flight duration, the build parameters, the
+package version and the cache format: a changed scenario, size or release
+never reads a stale entry. The cache directory is, in order: the ``cache_dir``
+argument, the environment variable ``FUELHM_BENCH_CACHE``,
+``$XDG_CACHE_HOME/fuelhm-bench``, ``~/.cache/fuelhm-bench``; ``cache_dir=False``
+keeps products in memory only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import shutil
+import tempfile
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from fuelhm_bench.errors import ParameterError
+
+__all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
+           "knowledge_build", "published_knowledge", "resolve_scenario", "surrogate_knowledge",
+           "training_indicators"]
+
+#: Environment variable overriding the default cache directory.
+CACHE_ENV_VAR: str = "FUELHM_BENCH_CACHE"
+
+_FORMAT = 1
+_MEMORY: OrderedDict[str, object] = OrderedDict()
+_MEMORY_SIZE = 64
+
+
+@dataclass(frozen=True)
+class KnowledgeSize:
+    """How much to simulate for the published knowledge and the surrogate.
+
+    The defaults reproduce :func:`fuelhm_bench.evaluation.scenario_data`
+    (a 6-unit design of experiments, the 8 x 5 published healthy fleet of
+    :meth:`~fuelhm_bench.knowledge.KnowledgeBuild.from_scenario`).
+
+    Parameters
+    ----------
+    doe_units : int, default=6
+        Units of the ITL design of experiments (each flies 1 + 7 x
+        ``len(doe_intensities)`` flights), >= 1.
+    doe_intensities : tuple of float, default=(0.25, 0.5, 0.75, 1.0)
+        Intensities of the design of experiments, each in (0, 1] (fraction of
+        the Table III maximum).
+    healthy_units : int, default=8
+        Units of the published healthy fleet (published model), >= 1.
+    healthy_flights : int, default=5
+        Flights per published healthy unit, >= 1 (units x flights >= 11 for a
+        10-indicator Gaussian).
+    surrogate_units : int, default=20
+        Units of the healthy fleet the surrogate's Gaussian model is learnt
+        on (the scenario's training fleet, continued), >= 1.
+    surrogate_flights : int, default=10
+        Flights per surrogate healthy unit, >= 1.
+
+    Examples
+    --------
+    >>> KnowledgeSize.small().doe_units
+    1
+    """
+
+    doe_units: int = 6
+    doe_intensities: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
+    healthy_units: int = 8
+    healthy_flights: int = 5
+    surrogate_units: int = 20
+    surrogate_flights: int = 10
+
+    def __post_init__(self) -> None:
+        def bad(name: str, allowed: str) -> ParameterError:
+            return ParameterError(f"The '{name}' parameter of KnowledgeSize must be {allowed}. "
+                                  f"Got {getattr(self, name)!r} instead.")
+
+        for name in ("doe_units", "healthy_units", "healthy_flights", "surrogate_units", "surrogate_flights"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool)) or value < 1:
+                raise bad(name, "an int >= 1")
+        try:
+            intensities = tuple(float(f) for f in self.doe_intensities)
+        except (TypeError, ValueError):
+            raise bad("doe_intensities", "a non-empty tuple of floats in (0, 1]") from None
+        if not intensities or not all(0.0 < f <= 1.0 for f in intensities):
+            raise bad("doe_intensities", "a non-empty tuple of floats in (0, 1]")
+        object.__setattr__(self, "doe_intensities", intensities)
+
+    @classmethod
+    def small(cls) -> KnowledgeSize:
+        """A quick build for tests: 1 DOE unit at 2 intensities, 4 x 4 published and 6 x 5 surrogate healthy flights."""
+        return cls(doe_units=1, doe_intensities=(0.5, 1.0), healthy_units=4, healthy_flights=4,
+                   surrogate_units=6, surrogate_flights=5)
+
+    @classmethod
+    def coerce(cls, value: object, owner: str) -> KnowledgeSize:
+        """A :class:`KnowledgeSize` from itself, a dict of its fields, or None (the defaults)."""
+        if value is None:
+            return cls()
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, dict):
+            from fuelhm_bench.envs._validation import did_you_mean
+
+            names = [f.name for f in dataclasses.fields(cls)]
+            for key in value:
+                if key not in names:
+                    raise ParameterError(f"The 'knowledge_size' parameter of {owner} has the unknown field {key!r}; "
+                                         f"fields: {', '.join(names)}.{did_you_mean(key, names)}")
+            return cls(**value)
+        raise ParameterError(f"The 'knowledge_size' parameter of {owner} must be a KnowledgeSize, a dict of its "
+                             f"fields or None. Got {type(value).__name__} instead.")
+
+
+def resolve_scenario(scenario: object):
+    """A :class:`~fuelhm_bench.scenarios.Scenario` from itself, a shipped name or a YAML path."""
+    from fuelhm_bench.scenarios import Scenario, load_scenario
+
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, (str, os.PathLike)):
+        return load_scenario(scenario)
+    raise ParameterError(f"The 'scenario' parameter must be a shipped scenario name, a YAML path or a Scenario. "
+                         f"Got {type(scenario).__name__} instead.")
+
+
+def _check_minutes(flight_minutes, owner: str) -> None:
+    if flight_minutes is not None and not (isinstance(flight_minutes, (int, float)) and not isinstance(
+            flight_minutes, bool) and math.isfinite(flight_minutes)):
+        raise ParameterError(f"The 'flight_minutes' parameter of {owner} must be a finite number or None. "
+                             f"Got {flight_minutes!r} instead.")
+
+
+def _with_minutes(config, flight_minutes: float | None):
+    if flight_minutes is None:
+        return config
+    return dataclasses.replace(config, mission=dataclasses.replace(config.mission, duration_s=60.0 * flight_minutes))
+
+
+def knowledge_build(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None):
+    """The :class:`~fuelhm_bench.knowledge.KnowledgeBuild` of the published knowledge.
+
+    Same recipe as :func:`fuelhm_bench.evaluation.scenario_data`:
+    :meth:`KnowledgeBuild.from_scenario <fuelhm_bench.knowledge.KnowledgeBuild.from_scenario>`
+    with the training seed (design of experiments and healthy fleet on the
+    published model, with the scenario's mission and sensor).
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+    flight_minutes : float or None, default=None
+        Flight duration [min]; None: the scenario's.
+    size : KnowledgeSize or None, default=None
+
+    Returns
+    -------
+    KnowledgeBuild
+    """
+    from fuelhm_bench.knowledge import KnowledgeBuild
+
+    sc = resolve_scenario(scenario)
+    size = KnowledgeSize() if size is None else size
+    return KnowledgeBuild.from_scenario(sc, doe_units=size.doe_units, intensities=size.doe_intensities,
+                                        minutes=flight_minutes, healthy_units=size.healthy_units,
+                                        healthy_flights=size.healthy_flights,
+                                        seed=sc.training_fleet_config().seed)
+
+
+def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **params) -> str:
+    """SHA-256 hex digest identifying a cached product (see the module docstring).
+
+    Parameters
+    ----------
+    kind : str
+        ``"knowledge"`` or ``"training"``.
+    scenario : str, Path or Scenario
+    flight_minutes : float or None, default=None
+        None and the scenario's own duration give the same key.
+    **params
+        Build parameters (JSON-serialisable).
+    """
+    from fuelhm_bench import __version__
+
+    sc = resolve_scenario(scenario)
+    content = sc.to_dict()
+    content.pop("description", None)
+    minutes = float(sc.mission.duration_min if flight_minutes is None else flight_minutes)
+    material = {"kind": kind, "format": _FORMAT, "package": __version__, "scenario": content,
+                "flight_minutes": minutes, "params": params}
+    text = json.dumps(material, sort_keys=True, default=repr, allow_nan=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def default_cache_dir() -> Path:
+    """The cache directory used when none is given (see the module docstring)."""
+    env = os.environ.get(CACHE_ENV_VAR)
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "fuelhm-bench"
+
+
+def clear_memory_cache() -> None:
+    """Forget every product kept in memory by this process (the disk cache is untouched)."""
+    _MEMORY.clear()
+
+
+def _entry(cache_dir, kind: str, sc, key: str) -> Path | None:
+    if cache_dir is False:
+        return None
+    directory = Path(default_cache_dir() if cache_dir is None else cache_dir)
+    return directory / f"fuelhm-v{_FORMAT}" / f"{kind}-{sc.id}-{key[:16]}"
+
+
+def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callable[[], dict[str, pd.DataFrame]],
+            finish: Callable[[dict[str, pd.DataFrame]], object], meta: dict):
+    """Memory, then disk, then ``build()``; ``finish`` turns the tables into the product."""
+    if key in _MEMORY:
+        _MEMORY.move_to_end(key)
+        return _MEMORY[key]
+    product = None
+    if entry is not None:
+        tables = _load(entry, key, names)
+        if tables is not None:
+            try:
+                product = finish(tables)
+            except Exception:  # noqa: BLE001 - a damaged entry is rebuilt, never trusted
+                product = None
+    if product is None:
+        tables = build()
+        product = finish(tables)
+        if entry is not None:
+            _store(entry, key, tables, meta)
+    _MEMORY[key] = product
+    if len(_MEMORY) > _MEMORY_SIZE:
+        _MEMORY.popitem(last=False)
+    return product
+
+
+def published_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
+                        cache_dir: str | os.PathLike | bool | None = None,
+                        progress: Callable[[int], object] | None = None):
+    """The published knowledge of a scenario (as :func:`fuelhm_bench.evaluation.scenario_data` builds it), cached.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        A shipped name, a YAML path or a loaded scenario.
+    flight_minutes : float or None, default=None
+        Flight duration [min]; None: the scenario's ``mission.duration_min``.
+    size : KnowledgeSize or None, default=None
+        Build size (``doe_*``, ``healthy_*`` fields); None: the defaults.
+    cache_dir : str, path-like, False or None, default=None
+        Disk cache directory; None: :func:`default_cache_dir`; False: memory only.
+    progress : callable, optional
+        Called with numbers of flights simulated (only when building).
+
+    Returns
+    -------
+    KnowledgeResult
+        The same tables and fitted numbers whichever cache answered.
+    """
+    from fuelhm_bench.knowledge import build_knowledge
+
+    sc = resolve_scenario(scenario)
+    _check_minutes(flight_minutes, "published_knowledge")
+    size = KnowledgeSize() if size is None else size
+    params = {"doe_units": size.doe_units, "doe_intensities": list(size.doe_intensities),
+              "healthy_units": size.healthy_units, "healthy_flights": size.healthy_flights}
+    key = cache_key("knowledge", sc, flight_minutes=flight_minutes, **params)
+    build = knowledge_build(sc, flight_minutes=flight_minutes, size=size)
+
+    def make() -> dict[str, pd.DataFrame]:
+        result = build_knowledge(build, progress=progress)
+        return {"healthy": result.healthy_table, "doe": result.doe_table}
+
+    def finish(tables: dict[str, pd.DataFrame]):
+        return _refit(tables["healthy"], tables["doe"], dict(build.max_intensity))
+
+    return _cached(key, _entry(cache_dir, "knowledge", sc, key), ("healthy", "doe"), make, finish,
+                   {"scenario": sc.id, "kind": "knowledge", "flight_minutes": flight_minutes, **params})
+
+
+def training_indicators(scenario, *, flight_minutes: float | None = None, units: int | None = None,
+                        flights: int | None = None, drifted: bool = False,
+                        cache_dir: str | os.PathLike | bool | None = None,
+                        progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+    """Indicator table of the scenario's healthy training fleet (what methods are fitted on), cached.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+    flight_minutes : float or None, default=None
+        Flight duration [min]; None: the scenario's.
+    units, flights : int or None, default=None
+        Fleet size; None: the scenario's ``training`` section. Flights are
+        seeded per (unit, flight), so a larger fleet continues the smaller one.
+    drifted : bool, default=False
+        Apply the scenario's nominal-parameter drift to the fleet's nominal
+        model (the scored fleet's healthy state); training data never has it.
+    cache_dir : str, path-like, False or None, default=None
+    progress : callable, optional
+
+    Returns
+    -------
+    pandas.DataFrame
+        The table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
+    """
+    from fuelhm_bench.datasets import fleet_indicators
+
+    sc = resolve_scenario(scenario)
+    _check_minutes(flight_minutes, "training_indicators")
+    config = _with_minutes(sc.training_fleet_config(), flight_minutes)
+    units = config.n_units if units is None else units
+    flights = config.n_flights if flights is None else flights
+    drifted = bool(drifted) and bool(sc.drift)
+    config = dataclasses.replace(config, n_units=units, n_flights=flights,
+                                 **({"nominal": sc.drifted_model()} if drifted else {}))
+    params = {"units": units, "flights": flights, "drifted": drifted}
+    key = cache_key("training", sc, flight_minutes=flight_minutes, **params)
+
+    def make() -> dict[str, pd.DataFrame]:
+        return {"table": fleet_indicators(config, progress=progress)[0]}
+
+    table = _cached(key, _entry(cache_dir, "training", sc, key), ("table",), make, lambda t: t["table"],
+                    {"scenario": sc.id, "kind": "training", "flight_minutes": flight_minutes, **params})
+    return table.copy()
+
+
+def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
+                        drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
+                        progress: Callable[[int], object] | None = None):
+    """What the surrogate fidelity draws from: the published ITL and a healthy model of the scored fleet.
+
+    The ITL (and signatures, DOE table) are those of :func:`published_knowledge`.
+    The healthy model is the published recipe (:class:`~fuelhm_bench.diagnosis.HealthyModel`)
+    fitted on ``size.surrogate_units x size.surrogate_flights`` healthy flights of
+    the scenario's training fleet (truth model: hidden effects included), with
+    the scored fleet's drift when ``drifted``: the healthy state of the scored
+    units, independent of how little training data a scenario gives methods.
+
+    Returns
+    -------
+    KnowledgeResult
+        ``healthy_table`` is that healthy table (with ``unit_id``).
+    """
+    from fuelhm_bench.diagnosis.healthy import HealthyModel
+    from fuelhm_bench.knowledge import KnowledgeResult
+
+    size = KnowledgeSize() if size is None else size
+    published = published_knowledge(scenario, flight_minutes=flight_minutes, size=size, cache_dir=cache_dir,
+                                    progress=progress)
+    table = training_indicators(scenario, flight_minutes=flight_minutes, units=size.surrogate_units,
+                                flights=size.surrogate_flights, drifted=drifted, cache_dir=cache_dir,
+                                progress=progress)
+    return KnowledgeResult(published.itl, HealthyModel().fit(table), published.signatures,
+                           dict(published.max_intensity), published.doe_table, table)
+
+
+def _refit(healthy: pd.DataFrame, doe: pd.DataFrame, max_intensity: dict):
+    """The fitting half of :func:`fuelhm_bench.knowledge.build_knowledge`, on stored tables."""
+    from fuelhm_bench.diagnosis.healthy import HealthyModel
+    from fuelhm_bench.diagnosis.itl import fit_itl
+    from fuelhm_bench.diagnosis.signatures import signature_matrix
+    from fuelhm_bench.knowledge import KnowledgeResult
+
+    healthy_model = HealthyModel().fit(healthy)
+    itl = fit_itl(doe)
+    sig = signature_matrix(itl, healthy_model, max_intensity=max_intensity)
+    return KnowledgeResult(itl, healthy_model, sig, dict(max_intensity), doe, healthy)
+
+
+def _load(entry: Path, key: str, names: tuple[str, ...]) -> dict[str, pd.DataFrame] | None:
+    """The stored tables of ``entry``, or None when absent, stale or unreadable."""
+    try:
+        meta = json.loads((entry / "meta.json").read_text(encoding="utf-8"))
+        if meta.get("key") != key:
+            return None
+        return {name: pd.read_parquet(entry / f"{name}.parquet") for name in names}
+    except (OSError, ValueError, KeyError, ImportError):
+        return None
+
+
+def _store(entry: Path, key: str, tables: dict[str, pd.DataFrame], meta: dict) -> None:
+    """Write an entry atomically (a temporary directory renamed into place); failures only cost a rebuild."""
+    from fuelhm_bench import __version__
+
+    try:
+        entry.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{entry.name}-", dir=entry.parent))
+        try:
+            for name, table in tables.items():
+                table.to_parquet(tmp / f"{name}.parquet", index=False)
+            info = {"key": key, **meta, "package_version": __version__, "format": _FORMAT}
+            (tmp / "meta.json").write_text(json.dumps(info, indent=2, default=repr), encoding="utf-8")
+            if entry.exists():
+                shutil.rmtree(entry, ignore_errors=True)
+            os.replace(tmp, entry)
+        finally:
+            if tmp.exists():
+                shutil.rmtree(tmp, ignore_errors=True)
+    except (OSError, ValueError, ImportError):
+        return

@@ -1,0 +1,546 @@
+"""Evaluate any method of the common interface through the environment, safely, and score it.
+
+The runner is the adapter between a :class:`fuelhm_bench.methods.BaseMethod`
+(or any object with ``fit``, ``start_unit`` and ``decide``) and
+``FuelHM/ActuationLoop-v0``: one episode per unit of the scenario's scored
+fleet (``reset(options={"unit": k})``, maintenance off, so faults evolve as
+scheduled as in the paper's KPIs), and for every flight
+
+1. the observation is turned into an indicator row (:func:`observation_row`:
+   ``flight_id``, ``unit_id``, ``flight_index``, the ten indicators with NaN
+   for invalid ones, ``<name>_valid``) - the only thing the method sees;
+2. ``method.decide(row)`` gives a :class:`~fuelhm_bench.methods.Decision`,
+   checked (:func:`~fuelhm_bench.methods.decision_problem`) and recorded;
+3. the decision becomes the action (:func:`action_from_decision`) and the
+   environment flies the next flight.
+
+The ground truth comes back once per episode, in the terminal
+``info["episode_truth"]``; it is turned into the labels table and never shown
+to the method. The protocol of :mod:`fuelhm_bench.evaluation` is kept: ``fit``
+on the fit part of the healthy training flights with the published knowledge,
+healthy calibration scores on held-out training units (thresholds
+``mu + A sigma`` of Table V come from them only), then the causal decisions.
+
+Safety is that of :func:`fuelhm_bench.evaluation.run_method`: ``fit``, the
+calibration scores *and the whole episode loop* run in a forked child process
+with a wall-clock limit, so a method that raises, hangs or returns invalid
+output yields an :class:`EnvOutcome` with ``status`` ``"error"``,
+``"timeout"`` or ``"invalid"``; the caller's process and other methods'
+results are never affected. Progress (flights done) is reported from the
+child to the parent through the same pipe.
+
+Examples
+--------
+>>> from fuelhm_bench.methods import NullMethod
+>>> from fuelhm_bench.runner import evaluate
+>>> outcome = evaluate(NullMethod(), "paper_2012", fidelity="surrogate")  # doctest: +SKIP
+>>> outcome.status, outcome.kpis()["fnr_standard_alarm"]                  # doctest: +SKIP
+('ok', 1.0)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import multiprocessing
+import time
+import traceback
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from fuelhm_bench.errors import DataFormatError, FuelHMError, MethodError, ParameterError
+from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+
+__all__ = ["EnvEvaluation", "EnvOutcome", "action_from_decision", "evaluate", "observation_row",
+           "prepare_evaluation", "run_in_env"]
+
+_VALID = tuple(f"{n}_valid" for n in INDICATOR_NAMES)
+_ROW_INDEX = pd.Index(["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *_VALID])
+
+
+# --------------------------------------------------------------------------- the adapter
+def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_id: Any = None) -> pd.Series:
+    """The indicator row a method sees for one observation of ``FuelHM/ActuationLoop-v0``.
+
+    Parameters
+    ----------
+    observation : dict
+        ``{"indicators": (10,) float32, "valid": (10,) 0/1}`` (a ``"raw"``
+        entry, if any, is not passed on).
+    unit_id : int or str
+        The unit's identifier.
+    flight_index : int
+        0-based index of the flight in the unit's life.
+    flight_id : int or str, optional
+        Identifier of the flight; None: ``flight_index``.
+
+    Returns
+    -------
+    pandas.Series
+        ``flight_id``, ``unit_id``, ``flight_index``, the ten indicators
+        (float, units of ``INDICATOR_UNITS``; NaN when invalid) and
+        ``<name>_valid`` (bool), the columns of an indicator table.
+    """
+    values = np.asarray(observation["indicators"], dtype=np.float64)
+    valid = np.asarray(observation["valid"]).astype(bool)
+    data = [flight_index if flight_id is None else flight_id, unit_id, int(flight_index),
+            *np.where(valid, values, np.nan).tolist(), *valid.tolist()]
+    return pd.Series(data, index=_ROW_INDEX, dtype=object)
+
+
+def action_from_decision(decision) -> dict:
+    """The action of ``FuelHM/ActuationLoop-v0`` for a :class:`~fuelhm_bench.methods.Decision`.
+
+    Returns
+    -------
+    dict
+        ``{"alarm": 0 or 1, "guilt": (7,) float32}``; the guilt is clipped to
+        [0, 1] (a valid Decision may exceed 1 by its 1e-6 sum tolerance).
+    """
+    guilt = np.clip(np.asarray(decision.guilt, dtype=np.float32), 0.0, 1.0)
+    return {"alarm": int(bool(decision.alarm)), "guilt": guilt}
+
+
+def _labels(truth: dict, n_flights: int) -> pd.DataFrame:
+    unit = truth["unit_id"]
+    data = {"flight_id": unit * n_flights + truth["flight_index"], "unit_id": np.full(n_flights, unit),
+            "flight_index": truth["flight_index"]}
+    for j, m in enumerate(MODE_IDS):
+        data[f"intensity_{m}"] = truth["intensity"][:, j]
+    for j, m in enumerate(MODE_IDS):
+        data[f"max_intensity_{m}"] = np.full(n_flights, truth["max_intensity"][j])
+    for j, m in enumerate(MODE_IDS):
+        data[f"onset_{m}"] = np.full(n_flights, truth["onset"][j], dtype=np.int64)
+    return pd.DataFrame(data)
+
+
+# --------------------------------------------------------------------------- evaluation set-up
+@dataclass(frozen=True, eq=False)
+class EnvEvaluation:
+    """Everything shared by the methods evaluated on one scenario (build it with :func:`prepare_evaluation`).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario (seed override and scale applied).
+    fidelity : {"physics", "surrogate"}
+        Fidelity of the scored flights.
+    units : tuple of int
+        Scored units, one episode each.
+    knowledge : KnowledgeResult
+        The published knowledge (ITL, signatures; handed to ``fit`` as
+        :class:`~fuelhm_bench.methods.Knowledge`).
+    fit_indicators : pandas.DataFrame
+        Healthy training flights the methods are fitted on.
+    calibration_indicators : pandas.DataFrame
+        Healthy training flights of held-out units, scored to set thresholds.
+    env : ActuationLoopEnv
+        The environment (``maintenance=False``).
+    nominal : EnvEvaluation or None, default=None
+        For a scenario with nominal-parameter drift: the same scored fleet
+        without the drift (``drifted=False``), to measure robustness.
+    """
+
+    scenario: Any
+    fidelity: str
+    units: tuple
+    knowledge: Any
+    fit_indicators: pd.DataFrame
+    calibration_indicators: pd.DataFrame
+    env: Any
+    nominal: EnvEvaluation | None = None
+
+    @property
+    def n_flights(self) -> int:
+        """Scored flights in total."""
+        return len(self.units) * self.env.n_flights
+
+    @property
+    def method_knowledge(self):
+        """The :class:`~fuelhm_bench.methods.Knowledge` handed to ``fit``."""
+        return self.knowledge.as_method_knowledge()
+
+
+def _split_training(train: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Fit / calibration parts of the healthy training table, as :func:`fuelhm_bench.evaluation.scenario_data`."""
+    units = list(dict.fromkeys(train["unit_id"]))
+    n_cal = max(1, int(round(0.25 * len(units)))) if len(units) > 1 else 0
+    cal_mask = train["unit_id"].isin(set(units[len(units) - n_cal:]))
+    fit_part = train[~cal_mask].reset_index(drop=True)
+    cal_part = train[cal_mask].reset_index(drop=True) if n_cal else train.reset_index(drop=True)
+    return fit_part, cal_part
+
+
+def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | None = None, scale: float = 1.0,
+                       flight_minutes: float | None = None, robustness: bool = True, knowledge_size=None,
+                       cache_dir=None, progress=None) -> EnvEvaluation:
+    """Load a scenario, get its published knowledge and training flights (cached), make the environment.
+
+    The data are those of :func:`fuelhm_bench.evaluation.scenario_data`: the
+    published knowledge from the benchmark's own simulations of the published
+    model, the methods' healthy flights from the scenario's training fleet
+    (split into fit and calibration units the same way) and, with the physics
+    fidelity, the very same scored flights.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        A shipped name, a YAML path or a loaded scenario.
+    fidelity : {"physics", "surrogate"} or None, default=None
+        None: the scenario's ``fidelity``.
+    seed : int or None, default=None
+        Overrides the scenario's master seed (both fleets re-derived from it).
+    scale : float, default=1.0
+        Multiplies the number of scored units (at least 1), > 0.
+    flight_minutes : float or None, default=None
+        Flight duration [min] of every simulated flight (knowledge, training,
+        scored); None: the scenario's.
+    robustness : bool, default=True
+        For a scenario with drift, also prepare the same fleet without it
+        (:attr:`EnvEvaluation.nominal`).
+    knowledge_size : KnowledgeSize, dict or None, default=None
+        Simulation sizes of the knowledge and the surrogate; None: the
+        defaults (:class:`~fuelhm_bench.envs.KnowledgeSize`).
+    cache_dir : str, path-like, False or None, default=None
+        Cache of the simulated products (see :mod:`fuelhm_bench.envs.cache`).
+    progress : callable, optional
+        Called with numbers of flights simulated while building them.
+
+    Returns
+    -------
+    EnvEvaluation
+    """
+    from fuelhm_bench.envs.actuation_loop import ActuationLoopEnv
+    from fuelhm_bench.envs.cache import (KnowledgeSize, published_knowledge, resolve_scenario, surrogate_knowledge,
+                                         training_indicators)
+
+    sc = resolve_scenario(scenario)
+    if seed is not None:
+        if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+            raise ParameterError(f"The 'seed' parameter of prepare_evaluation must be an int >= 0 or None. "
+                                 f"Got {seed!r} instead.")
+        sc = dataclasses.replace(sc, seeds=dataclasses.replace(sc.seeds, master=int(seed), training=None, test=None))
+    if not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and np.isfinite(scale) and scale > 0):
+        raise ParameterError(f"The 'scale' parameter of prepare_evaluation must be a finite number > 0. "
+                             f"Got {scale!r} instead.")
+    size = KnowledgeSize.coerce(knowledge_size, "prepare_evaluation")
+    fidelity = sc.fidelity if fidelity is None else fidelity
+    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
+    knowledge = published_knowledge(sc, size=size, **common)
+    fit_part, cal_part = _split_training(training_indicators(sc, **common))
+    n_units = max(1, int(round(sc.fleet.units * scale)))
+    scored = sc if n_units == sc.fleet.units else dataclasses.replace(
+        sc, fleet=dataclasses.replace(sc.fleet, units=n_units))  # products above are keyed on the unscaled one
+
+    def make(drifted: bool, nominal) -> EnvEvaluation:
+        env_knowledge = None
+        if fidelity == "surrogate":
+            env_knowledge = surrogate_knowledge(sc, size=size, drifted=drifted, **common)
+        env = ActuationLoopEnv(scenario=scored, fidelity=fidelity, maintenance=False, drifted=drifted,
+                               flight_minutes=flight_minutes, knowledge=env_knowledge)
+        env.reset(options={"unit": 0})  # compiles the simulator and builds the scored fleet before any fork
+        return EnvEvaluation(scored, env.fidelity, tuple(range(n_units)), knowledge, fit_part, cal_part, env,
+                             nominal)
+
+    nominal = make(False, None) if robustness and sc.drift else None
+    return make(True, nominal)
+
+
+# --------------------------------------------------------------------------- outcome
+@dataclass(frozen=True, eq=False)
+class EnvOutcome:
+    """What happened when a method was run through the environment.
+
+    Attributes
+    ----------
+    method : str
+        ``repr`` of the method.
+    status : {"ok", "error", "invalid", "timeout"}
+        ``"error"``: the method raised (or the environment failed, said in the
+        message); ``"invalid"``: it broke the Decision contract or returned
+        unusable output; ``"timeout"``: it was stopped after ``timeout_s``.
+    message : str
+        Empty when ok; otherwise what went wrong (with the traceback for errors).
+    decisions : DataFrame or None
+        ``unit_id, flight_index, score, alarm, guilt_<mode>`` per scored flight.
+    labels : DataFrame or None
+        Ground truth of the same flights (``flight_id``, ``unit_id``,
+        ``flight_index``, ``intensity_<mode>``, ``max_intensity_<mode>``,
+        ``onset_<mode>``).
+    healthy_scores : ndarray or None
+        The method's scores on the healthy calibration flights.
+    episodes : DataFrame or None
+        Per unit: ``unit_id``, ``flights``, ``return_kusd`` (sum of rewards:
+        minus the cost of the decisions under the scenario's cost model),
+        ``alarms``, ``false_alarms``, ``undetected_flights``, ``failures``.
+    seconds : float
+        Wall time (fit, calibration and episodes).
+    scenario : str
+        Scenario id.
+    fidelity : str
+        Fidelity of the scored flights.
+    """
+
+    method: str
+    status: str
+    message: str = ""
+    decisions: pd.DataFrame | None = None
+    labels: pd.DataFrame | None = None
+    healthy_scores: np.ndarray | None = None
+    episodes: pd.DataFrame | None = None
+    seconds: float = 0.0
+    scenario: str = ""
+    fidelity: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """True when the method ran and its output is valid."""
+        return self.status == "ok"
+
+    @property
+    def cost_kusd(self) -> float:
+        """Total cost of the method's decisions over the scored fleet [kUSD] (NaN unless ok)."""
+        return float(-self.episodes["return_kusd"].sum()) if self.ok else float("nan")
+
+    def run(self, name: str | None = None):
+        """The :class:`fuelhm_bench.scoring.Run` of this outcome.
+
+        Raises
+        ------
+        FuelHMError
+            When the outcome is not ok.
+        """
+        from fuelhm_bench.scoring import Run
+
+        if not self.ok:
+            first = self.message.splitlines()[0] if self.message else ""
+            raise FuelHMError(f"Cannot score {self.method}: {self.status}: {first}")
+        return Run(labels=self.labels, decisions=self.decisions, healthy_scores=self.healthy_scores,
+                   name=self.method if name is None else name)
+
+    def score(self, config=None):
+        """Scorecard (:func:`fuelhm_bench.scoring.score_run`) of this outcome."""
+        from fuelhm_bench.scoring import score_run
+
+        return score_run(self.run(), config)
+
+    def kpis(self, config=None) -> pd.Series:
+        """Headline KPIs (:func:`fuelhm_bench.scoring.headline_kpis`) plus ``cost_kusd``."""
+        from fuelhm_bench.scoring import headline_kpis
+
+        kpis = headline_kpis(self.score(config))
+        kpis["cost_kusd"] = self.cost_kusd
+        return kpis
+
+
+# --------------------------------------------------------------------------- the child
+class _EnvFailure(Exception):
+    """The environment (not the method) failed inside the child."""
+
+
+def _env_call(fn, *args, **kwargs):
+    try:
+        return fn(*args, **kwargs)
+    except BaseException as exc:  # noqa: BLE001 - re-raised with its origin
+        raise _EnvFailure(f"{type(exc).__name__}: {exc}") from exc
+
+
+def _episodes(method, evaluation: EnvEvaluation, conn) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    from fuelhm_bench.methods import decision_problem
+    from fuelhm_bench.methods.tables import DECISION_COLUMNS
+
+    env = evaluation.env
+    n = env.n_flights
+    name = type(method).__name__
+    unit_col, flight_col, scores, alarms, guilts = [], [], [], [], []
+    labels, episodes = [], []
+    for k in evaluation.units:
+        obs, info = _env_call(env.reset, options={"unit": k})
+        method.start_unit(k)
+        total, terminated = 0.0, False
+        for f in range(n):
+            row = observation_row(obs, k, f, k * n + f)
+            decision = method.decide(row)
+            problem = decision_problem(decision)
+            if problem is not None:
+                raise MethodError(f"{name} returned an invalid decision for unit {k!r}, flight {f}: {problem}.")
+            unit_col.append(k)
+            flight_col.append(f)
+            scores.append(decision.score)
+            alarms.append(decision.alarm)
+            guilts.append(decision.guilt)
+            obs, reward, terminated, _, info = _env_call(env.step, action_from_decision(decision))
+            total += reward
+        if not terminated or "episode_truth" not in info:
+            raise _EnvFailure(f"the episode of unit {k} did not terminate after its {n} flights")
+        truth = info.pop("episode_truth")
+        labels.append(_labels(truth, n))
+        alarm_k = np.array(alarms[-n:], dtype=bool)
+        episodes.append({"unit_id": k, "flights": n, "return_kusd": total, "alarms": int(alarm_k.sum()),
+                         "false_alarms": int((alarm_k & ~truth["detectable"]).sum()),
+                         "undetected_flights": int((~alarm_k & truth["detectable"]).sum()),
+                         "failures": int(truth["failure"].sum())})
+        conn.send(("progress", n))
+    guilt = np.array(guilts, dtype=np.float64).reshape(len(scores), len(MODE_IDS))
+    data = {"unit_id": np.array(unit_col, dtype=np.int64), "flight_index": np.array(flight_col, dtype=np.int64),
+            "score": np.array(scores, dtype=np.float64), "alarm": np.array(alarms, dtype=bool)}
+    data.update({f"guilt_{m}": guilt[:, j] for j, m in enumerate(MODE_IDS)})
+    decisions = pd.DataFrame(data, columns=list(DECISION_COLUMNS))
+    return decisions, pd.concat(labels, ignore_index=True), pd.DataFrame(episodes)
+
+
+def _child(method, evaluation: EnvEvaluation, random_state, conn) -> None:
+    from fuelhm_bench.methods import run_table
+
+    try:
+        method.fit(evaluation.fit_indicators, knowledge=evaluation.method_knowledge, random_state=random_state)
+        healthy = run_table(method, evaluation.calibration_indicators)["score"].to_numpy(dtype=float)
+        decisions, labels, episodes = _episodes(method, evaluation, conn)
+        conn.send(("ok", "", (decisions, labels, healthy, episodes)))
+    except _EnvFailure as exc:
+        conn.send(("error", f"The environment failed (not the method): {exc}\n"
+                            f"{traceback.format_exc(limit=8)}", None))
+    except MethodError as exc:
+        conn.send(("invalid", str(exc), None))
+    except BaseException as exc:  # noqa: BLE001 - the method is untrusted code
+        conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=8)}", None))
+    finally:
+        conn.close()
+
+
+def run_in_env(method, evaluation: EnvEvaluation, *, random_state: int = 0, timeout_s: float = 600.0,
+               progress=None) -> EnvOutcome:
+    """Fit ``method`` and run it on every scored unit in a child process; never raises for the method's faults.
+
+    Parameters
+    ----------
+    method : BaseMethod
+        Any object with ``fit``, ``start_unit`` and ``decide`` (the common interface).
+    evaluation : EnvEvaluation
+        From :func:`prepare_evaluation`.
+    random_state : int, default=0
+        Passed to ``fit``.
+    timeout_s : float, default=600.0
+        Wall-clock limit of fit + calibration + all episodes [s], > 0.
+    progress : callable, optional
+        Called with the number of flights done after each unit.
+
+    Returns
+    -------
+    EnvOutcome
+    """
+    if not (isinstance(timeout_s, (int, float)) and not isinstance(timeout_s, bool) and timeout_s > 0):
+        raise ParameterError(f"The 'timeout_s' parameter of run_in_env must be a number > 0. Got {timeout_s!r} "
+                             f"instead.")
+    name = repr(method)
+    meta = {"scenario": evaluation.scenario.id, "fidelity": evaluation.fidelity}
+    ctx = multiprocessing.get_context("fork")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(method, evaluation, random_state, child), daemon=True)
+    t0 = time.perf_counter()
+    proc.start()
+    child.close()
+    deadline = t0 + timeout_s
+    try:
+        while True:
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0 or not parent.poll(remaining):
+                _stop(proc)
+                return EnvOutcome(name, "timeout", f"{name} did not finish within {timeout_s:g} s; it was stopped.",
+                                  seconds=time.perf_counter() - t0, **meta)
+            try:
+                message = parent.recv()
+            except EOFError:
+                proc.join(5)
+                return EnvOutcome(name, "error", f"{name} crashed the worker process (exit code {proc.exitcode}).",
+                                  seconds=time.perf_counter() - t0, **meta)
+            if message[0] == "progress":
+                if progress is not None:
+                    progress(message[1])
+                continue
+            break
+    finally:
+        parent.close()
+    proc.join(5)
+    if proc.is_alive():
+        _stop(proc)
+    seconds = time.perf_counter() - t0
+    status, text, payload = message
+    if status != "ok":
+        return EnvOutcome(name, status, text, seconds=seconds, **meta)
+    decisions, labels, healthy, episodes = payload
+    problem = _check_outputs(name, decisions, labels, healthy, evaluation)
+    if problem:
+        return EnvOutcome(name, "invalid", problem, seconds=seconds, **meta)
+    return EnvOutcome(name, "ok", "", decisions, labels, healthy, episodes, seconds, **meta)
+
+
+def _stop(proc) -> None:
+    proc.terminate()
+    proc.join(5)
+    if proc.is_alive():
+        proc.kill()
+        proc.join(5)
+
+
+def _check_outputs(name: str, decisions, labels, healthy, evaluation: EnvEvaluation) -> str:
+    from fuelhm_bench.scoring import Run
+
+    healthy = np.asarray(healthy, dtype=float)
+    if healthy.size < 2 or not np.all(np.isfinite(healthy)):
+        return f"{name} returned non-finite scores on healthy calibration flights (or fewer than 2)."
+    if len(decisions) != evaluation.n_flights:
+        return f"{name} returned {len(decisions)} decisions for {evaluation.n_flights} scored flights."
+    try:
+        Run(labels=labels, decisions=decisions, healthy_scores=healthy, name=name)
+    except DataFormatError as exc:
+        return f"{name}: its output cannot be scored: {exc}"
+    return ""
+
+
+# --------------------------------------------------------------------------- one call
+def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None = None, scale: float = 1.0,
+             flight_minutes: float | None = None, random_state: int = 0, timeout_s: float = 600.0,
+             knowledge_size=None, cache_dir=None, progress: bool = False) -> EnvOutcome:
+    """Evaluate one method on one scenario through the environment (:func:`prepare_evaluation` + :func:`run_in_env`).
+
+    Parameters
+    ----------
+    method : BaseMethod
+        The method (not modified: the child process fits its own copy).
+    scenario : str, Path or Scenario
+        A shipped name, a YAML path or a loaded scenario.
+    fidelity, seed, scale, flight_minutes, knowledge_size, cache_dir
+        See :func:`prepare_evaluation`.
+    random_state : int, default=0
+        Passed to ``fit``.
+    timeout_s : float, default=600.0
+        Time limit of the method [s].
+    progress : bool, default=False
+        Show progress bars on stderr (:func:`fuelhm_bench.cli._common.progress_bar`).
+
+    Returns
+    -------
+    EnvOutcome
+        Call ``.kpis()`` or ``.score()`` on it.
+    """
+    if progress:
+        from fuelhm_bench.cli._common import progress_bar
+
+        with progress_bar(0, "published knowledge") as bar:
+            def grow(k: int) -> None:
+                bar.total += k
+                bar.update(k)
+
+            evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
+                                            flight_minutes=flight_minutes, knowledge_size=knowledge_size,
+                                            cache_dir=cache_dir, progress=grow)
+        with progress_bar(evaluation.n_flights, f"{type(method).__name__} on {evaluation.scenario.id}") as bar:
+            return run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s,
+                              progress=bar.update)
+    evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
+                                    flight_minutes=flight_minutes, knowledge_size=knowledge_size,
+                                    cache_dir=cache_dir)
+    return run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s)
