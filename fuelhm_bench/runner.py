@@ -164,7 +164,12 @@ class EnvEvaluation:
 
 
 def _split_training(train: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Fit / calibration parts of the healthy training table, as :func:`fuelhm_bench.evaluation.scenario_data`."""
+    """Fit / calibration parts of the healthy training table, as :func:`fuelhm_bench.evaluation.scenario_data`.
+
+    Only the columns of an observation row are kept (no ``n_points`` / ``quality_reason``: the
+    environment does not observe them), so a method sees the same columns in training and scoring.
+    """
+    train = train[list(_ROW_INDEX)]
     units = list(dict.fromkeys(train["unit_id"]))
     n_cal = max(1, int(round(0.25 * len(units)))) if len(units) > 1 else 0
     cal_mask = train["unit_id"].isin(set(units[len(units) - n_cal:]))
@@ -181,8 +186,9 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     The data are those of :func:`fuelhm_bench.evaluation.scenario_data`: the
     published knowledge from the benchmark's own simulations of the published
     model, the methods' healthy flights from the scenario's training fleet
-    (split into fit and calibration units the same way) and, with the physics
-    fidelity, the very same scored flights.
+    (split into fit and calibration units the same way, restricted to the
+    columns of :func:`observation_row`) and, with the physics fidelity, the very
+    same scored flights.
 
     Parameters
     ----------

@@ -406,9 +406,14 @@ def _load(entry: Path, key: str, names: tuple[str, ...]) -> dict[str, pd.DataFra
         meta = json.loads((entry / "meta.json").read_text(encoding="utf-8"))
         if meta.get("key") != key:
             return None
-        return {name: pd.read_parquet(entry / f"{name}.parquet") for name in names}
+        tables = {name: pd.read_parquet(entry / f"{name}.parquet") for name in names}
     except (OSError, ValueError, KeyError, ImportError):
         return None
+    for table in tables.values():  # text columns come back as pandas strings; the builders make object columns
+        for column in table.columns:
+            if isinstance(table[column].dtype, pd.StringDtype):
+                table[column] = table[column].astype(object)
+    return tables
 
 
 def _store(entry: Path, key: str, tables: dict[str, pd.DataFrame], meta: dict) -> None:

@@ -1,0 +1,277 @@
+"""The runner: methods of the common interface through FuelHM/ActuationLoop-v0, safely.
+
+A tiny scenario (3 units x 8 flights, 4 x 4 training flights, 2-minute flights) keeps every test fast.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from fuelhm_bench.envs import KnowledgeSize
+from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.methods import BaseMethod, Decision, NullMethod
+from fuelhm_bench.runner import (EnvOutcome, action_from_decision, evaluate, observation_row, prepare_evaluation,
+                                 run_in_env)
+from fuelhm_bench.scenarios import load_scenario
+from fuelhm_bench.scoring import LABEL_COLUMNS
+from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+
+SIZE = KnowledgeSize(doe_units=1)  # scenario_data(doe_units=1) builds the same published knowledge
+
+
+def tiny(base="paper_2012", name="tiny", **changes):
+    sc = load_scenario(base)
+    degradations = tuple(dataclasses.replace(d, onset_min=1, onset_max=3, ramp_flights=3) for d in sc.degradations)
+    fields = dict(name=name, fleet=dataclasses.replace(sc.fleet, units=3, flights_per_unit=8),
+                  mission=dataclasses.replace(sc.mission, duration_min=2.0),
+                  training=dataclasses.replace(sc.training, units=4, flights_per_unit=4), degradations=degradations)
+    if not sc.simultaneous:
+        n = len(degradations)
+        fields.update(healthy_probability=0.0,
+                      degradations=tuple(dataclasses.replace(d, probability=1.0 / n) for d in degradations))
+    fields.update(changes)
+    return dataclasses.replace(sc, **fields)
+
+
+@pytest.fixture(scope="module")
+def cache_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("fuelhm-cache")
+
+
+@pytest.fixture(scope="module")
+def surrogate_eval(cache_dir):
+    return prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(), cache_dir=cache_dir)
+
+
+class IdleCurrent(BaseMethod):
+    """Alarms when I0 leaves its healthy band; blames null-bias drift."""
+
+    def __init__(self, *, a=4.0):
+        self.a = a
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        self.mu_, self.sd_ = healthy["I0"].mean(), healthy["I0"].std()
+
+    def _decide(self, row):
+        z = 0.0 if np.isnan(row["I0"]) else abs(row["I0"] - self.mu_) / self.sd_
+        return Decision(score=z, alarm=z > self.a, guilt=np.eye(7)[1] if z > self.a else np.zeros(7))
+
+
+# --------------------------------------------------------------------------- the adapter
+def test_observation_row_and_action():
+    obs = {"indicators": np.arange(10, dtype=np.float32), "valid": np.array([1] * 9 + [0], dtype=np.int8)}
+    row = observation_row(obs, unit_id=4, flight_index=2, flight_id=42)
+    assert list(row.index) == ["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES,
+                               *(f"{n}_valid" for n in INDICATOR_NAMES)]
+    assert row["flight_id"] == 42 and row["unit_id"] == 4 and row["flight_index"] == 2
+    assert row["X1"] == 0.0 and row["G_out"] == 8.0 and np.isnan(row["G_null"]) and row["G_null_valid"] is False
+    action = action_from_decision(Decision(score=1.0, alarm=True, guilt=[0, 1.0000004, 0, 0, 0, 0, 0]))
+    assert action["alarm"] == 1 and action["guilt"].dtype == np.float32 and action["guilt"].max() == 1.0
+
+
+# --------------------------------------------------------------------------- equivalence with the data pipeline
+def test_physics_runner_reproduces_the_evaluation_pipeline(cache_dir):
+    """Same knowledge, same training split, same scored flights, same decisions as scenario_data + run_method."""
+    from baselines.paper_mahalanobis import PaperMahalanobis
+    from fuelhm_bench.evaluation import run_method, scenario_data
+
+    sc = tiny()
+    data, knowledge = scenario_data(sc, doe_units=1)
+    evaluation = prepare_evaluation(sc, fidelity="physics", knowledge_size=SIZE, cache_dir=cache_dir)
+    columns = list(evaluation.fit_indicators.columns)  # the observation's columns (no n_points, quality_reason)
+    assert columns == ["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *(f"{n}_valid" for n in INDICATOR_NAMES)]
+    pd.testing.assert_frame_equal(evaluation.fit_indicators, data.fit_indicators[columns])
+    pd.testing.assert_frame_equal(evaluation.calibration_indicators, data.calibration_indicators[columns])
+    pd.testing.assert_frame_equal(evaluation.knowledge.itl.table, knowledge.itl.table)
+    reference = run_method(PaperMahalanobis(), data)
+    outcome = run_in_env(PaperMahalanobis(), evaluation)
+    assert reference.ok and outcome.ok, outcome.message
+    labels = data.test_labels[list(LABEL_COLUMNS)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(outcome.labels[list(LABEL_COLUMNS)], labels, check_dtype=False)
+    np.testing.assert_array_equal(outcome.healthy_scores, reference.healthy_scores)
+    # the environment's observations are float32: scores agree to float32 precision
+    np.testing.assert_allclose(outcome.decisions["score"], reference.decisions["score"], rtol=1e-4)
+    assert (outcome.decisions["alarm"] == reference.decisions["alarm"]).mean() >= 0.95
+    card = outcome.score()
+    assert 0.0 <= card.summary_score <= 100.0
+
+
+def test_surrogate_null_method_cost_is_the_cost_model(surrogate_eval):
+    """A never-alarming method pays undetected_flight_kusd per detectable flight and failure_kusd per failure."""
+    outcome = run_in_env(NullMethod(), surrogate_eval)
+    assert outcome.ok and outcome.fidelity == "surrogate" and outcome.scenario == "tiny-v1"
+    costs = surrogate_eval.scenario.costs
+    inten = outcome.labels[[f"intensity_{m}" for m in MODE_IDS]].to_numpy()
+    maxi = outcome.labels[[f"max_intensity_{m}" for m in MODE_IDS]].to_numpy()
+    detectable = ((inten > 0) & (inten >= costs.detectable_fraction * maxi)).any(axis=1)
+    failed = (inten > 0) & (inten >= costs.failure_fraction * maxi)
+    first_failures = sum(int(failed[outcome.labels["unit_id"].to_numpy() == k][:, j].any())
+                         for k in range(3) for j in range(7))
+    expected = detectable.sum() * costs.undetected_flight_kusd + first_failures * costs.failure_kusd
+    assert first_failures >= 1 and outcome.cost_kusd == pytest.approx(expected)
+    kpis = outcome.kpis()
+    assert kpis["fnr_standard_alarm"] == 1.0 and kpis["cost_kusd"] == outcome.cost_kusd
+    assert list(outcome.episodes["unit_id"]) == [0, 1, 2]
+
+
+# --------------------------------------------------------------------------- safety
+class Raises(IdleCurrent):
+    def _decide(self, row):
+        if row["flight_index"] == 3:
+            raise RuntimeError("boom at flight 3")
+        return super()._decide(row)
+
+
+class Hangs(IdleCurrent):
+    def _decide(self, row):
+        time.sleep(3600)
+
+
+class NaNScore(IdleCurrent):
+    def _decide(self, row):
+        return Decision(score=float("nan"), alarm=False)
+
+
+class NotADecision:
+    """Duck-typed method (no BaseMethod) whose decide returns a float."""
+
+    def fit(self, healthy, *, knowledge=None, random_state=None):
+        return self
+
+    def start_unit(self, unit_id):
+        pass
+
+    def decide(self, row):
+        return 0.5
+
+
+class Exits(IdleCurrent):
+    def _decide(self, row):
+        os._exit(7)
+
+
+class Peeks(IdleCurrent):
+    """Fails unless every row holds exactly the observation columns."""
+
+    def _decide(self, row):
+        allowed = {"flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *(f"{n}_valid" for n in INDICATOR_NAMES)}
+        if set(row.index) != allowed:
+            raise AssertionError(f"unexpected columns {set(row.index) ^ allowed}")
+        return super()._decide(row)
+
+
+def test_misbehaving_methods_are_reported_and_others_unaffected(surrogate_eval):
+    outcomes = {type(m).__name__: run_in_env(m, surrogate_eval, timeout_s=3.0)
+                for m in (Raises(), Hangs(), NaNScore(), NotADecision(), Exits(), Peeks())}
+    assert outcomes["Raises"].status == "error" and "boom at flight 3" in outcomes["Raises"].message
+    assert outcomes["Hangs"].status == "timeout" and "3 s" in outcomes["Hangs"].message
+    assert outcomes["NaNScore"].status == "invalid" and "NaNScore returned an invalid decision" in \
+        outcomes["NaNScore"].message
+    assert outcomes["NotADecision"].status == "invalid" and "not a Decision" in outcomes["NotADecision"].message
+    assert outcomes["Exits"].status == "error" and "exit code 7" in outcomes["Exits"].message
+    assert outcomes["Peeks"].ok, outcomes["Peeks"].message
+    for name in ("Raises", "Hangs", "NaNScore", "Exits"):
+        assert outcomes[name].decisions is None and outcomes[name].labels is None
+        with pytest.raises(Exception, match="Cannot score"):
+            outcomes[name].run()
+    assert run_in_env(IdleCurrent(), surrogate_eval).ok  # the evaluation is still usable
+
+
+def test_environment_failure_is_not_blamed_on_the_method(cache_dir):
+    evaluation = prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(),
+                                    cache_dir=cache_dir)
+
+    def broken(action):
+        raise FloatingPointError("simulator diverged")
+
+    evaluation.env.step = broken
+    outcome = run_in_env(NullMethod(), evaluation)
+    assert outcome.status == "error" and outcome.message.startswith("The environment failed (not the method)")
+    assert "simulator diverged" in outcome.message
+
+
+def test_progress_counts_every_scored_flight(surrogate_eval):
+    done = []
+    assert run_in_env(NullMethod(), surrogate_eval, progress=done.append).ok
+    assert done == [8, 8, 8] and sum(done) == surrogate_eval.n_flights
+
+
+def test_drift_scenario_prepares_the_nominal_fleet(cache_dir):
+    evaluation = prepare_evaluation(tiny("robustness_drift", name="drifty"), fidelity="surrogate",
+                                    knowledge_size=KnowledgeSize.small(), cache_dir=cache_dir)
+    nominal = evaluation.nominal
+    assert nominal is not None and nominal.env.drifted is False and evaluation.env.drifted is True
+    a, b = run_in_env(NullMethod(), evaluation), run_in_env(NullMethod(), nominal)
+    pd.testing.assert_frame_equal(a.labels, b.labels)  # same fleet and faults, only the nominal model differs
+    assert prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(),
+                              cache_dir=cache_dir).nominal is None
+
+
+def test_seed_and_scale(cache_dir):
+    evaluation = prepare_evaluation(tiny(), fidelity="surrogate", seed=5, scale=0.4,
+                                    knowledge_size=KnowledgeSize.small(), cache_dir=cache_dir)
+    assert evaluation.units == (0,) and evaluation.scenario.seeds.master == 5
+    assert evaluation.n_flights == 8
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"seed": -1}, r"'seed' parameter of prepare_evaluation must be an int >= 0"),
+    ({"scale": 0.0}, r"'scale' parameter of prepare_evaluation must be a finite number > 0"),
+    ({"fidelity": "fast"}, r"'fidelity' parameter .*Got 'fast'"),
+    ({"knowledge_size": {"doe_unts": 1}}, r"Did you mean 'doe_units'"),
+])
+def test_bad_arguments(cache_dir, kwargs, match):
+    with pytest.raises(ParameterError, match=match):
+        prepare_evaluation(tiny(), **{"knowledge_size": KnowledgeSize.small(), "cache_dir": cache_dir, **kwargs})
+
+
+def test_bad_timeout(surrogate_eval):
+    with pytest.raises(ParameterError, match="'timeout_s' parameter of run_in_env must be a number > 0"):
+        run_in_env(NullMethod(), surrogate_eval, timeout_s=0)
+
+
+def test_outcome_is_a_frozen_record():
+    outcome = EnvOutcome("m", "error", "bad")
+    assert not outcome.ok and np.isnan(outcome.cost_kusd)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        outcome.status = "ok"
+
+
+# --------------------------------------------------------------------------- the README example
+README_EXAMPLE = '''
+import numpy as np
+from fuelhm_bench.methods import BaseMethod, Decision
+from fuelhm_bench.runner import evaluate
+
+class IdleCurrent(BaseMethod):          # alarms when I0 (mA) leaves its healthy band
+    def __init__(self, *, a=4.0):
+        self.a = a
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        self.mu_, self.sd_ = healthy["I0"].mean(), healthy["I0"].std()
+    def _decide(self, row):
+        z = 0.0 if np.isnan(row["I0"]) else abs(row["I0"] - self.mu_) / self.sd_
+        return Decision(score=z, alarm=z > self.a, guilt=np.eye(7)[1] * (z > self.a))
+
+outcome = evaluate(IdleCurrent(), "my_scenario.yaml", fidelity="surrogate")
+print(outcome.status, outcome.kpis()[["fpr_standard_thr", "fnr_standard_thr", "cost_kusd"]])
+'''
+
+
+def test_readme_example_runs_on_a_custom_scenario(tmp_path, monkeypatch, capsys):
+    leak = dataclasses.replace(tiny().degradations[1], probability=0.7)  # internal leakage in 70 % of the units
+    sc = tiny(name="my_scenario", degradations=(leak,), healthy_probability=0.3)
+    (tmp_path / "my_scenario.yaml").write_text(yaml.safe_dump(sc.to_dict(), sort_keys=False))
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("FUELHM_BENCH_CACHE", str(tmp_path / "cache"))
+    code = README_EXAMPLE.replace('fidelity="surrogate")', 'fidelity="surrogate", knowledge_size=SMALL)')
+    exec(compile(code, "README.md", "exec"), {"SMALL": KnowledgeSize.small(), "__name__": "readme"})
+    out = capsys.readouterr().out
+    assert out.startswith("ok") and "cost_kusd" in out
+    assert len(README_EXAMPLE.strip().splitlines()) <= 16
