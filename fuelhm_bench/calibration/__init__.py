@@ -1,0 +1,1 @@
+"""Recalibration and model discrepancy (work in progress)."""

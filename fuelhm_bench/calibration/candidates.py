@@ -1,0 +1,118 @@
+"""Candidate effects for the model-discrepancy workflow: what is fitted, where the search starts.
+
+Each candidate is an optional effect of :mod:`fuelhm_bench.physics.effects` with the
+parameters the workflow fits (shared by all units, bounded by the effect's documented
+range), the parameters it holds, and a grid of start points spanning the range (the
+multi-start: every grid point is scored with the recalibrated units, the fit starts from
+the best one).
+
+=====================  ==========================================  ==============================================
+effect                 fitted [range]                               held
+=====================  ==========================================  ==============================================
+``spool_overlap``      ``overlap_m`` (log) [1e-7, 1e-4] m           --
+``spool_flow_force``   ``stiffness_ratio`` (log) [1e-3, 3]          --
+``rod_friction``       ``coulomb_n`` (log) [1, 5000] N,             ``stribeck_velocity_m_s`` = 2 mm/s,
+                       ``static_ratio`` [1, 3]                      ``viscous_n_s_m`` = 0
+``lvdt_lag``           ``time_constant_s`` (log) [1e-4, 0.5] s      --
+``load_stiffness``     ``stiffness_n_m`` [-5e5, 5e5] N/m,           --
+                       ``reference_m`` [0, stroke] m
+=====================  ==========================================  ==============================================
+
+Held parameters: the Stribeck velocity shapes the friction below a few mm/s, where the
+velocity quantum of the differentiated position (``q / (10 T)`` = 0.17 mm/s at 12 bit and
+100 Hz, but the idle hunting spans a few mm/s) leaves it unidentifiable; the viscous term
+``b v`` is a velocity-proportional force, aliased with the slot widths that the
+recalibration fits per unit. The lower ends of the log ranges (the documented ranges are
+open at 0) are far below any visible magnitude. The reference of ``load_stiffness`` is
+searched over the stroke (a reference beyond it is a constant force, which the
+recalibrated load already holds).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fuelhm_bench.calibration.fit import FitParameter
+from fuelhm_bench.errors import UnknownNameError
+from fuelhm_bench.taxonomy import EFFECT_IDS
+
+
+@dataclass(frozen=True)
+class EffectCandidate:
+    """One candidate effect of the discrepancy search.
+
+    Parameters
+    ----------
+    effect : str
+        Effect id.
+    parameters : tuple of FitParameter
+        Fitted (fleet-wide) parameters, paths ``effect.<id>.<field>``.
+    fixed : dict
+        Parameters held at these values [SI].
+    grid : tuple of dict
+        Start points (values of the fitted parameters) [SI].
+    """
+
+    effect: str
+    parameters: tuple
+    fixed: dict
+    grid: tuple
+
+    def start_values(self, point: dict) -> dict:
+        """Effect parameters (fixed + a grid point) by field name [SI]."""
+        return {**self.fixed, **point}
+
+
+def _p(effect: str, name: str, unit: str, typical: float, lower: float, upper: float, log: bool = False) -> FitParameter:
+    return FitParameter(f"effect.{effect}.{name}", unit, typical, lower=lower, upper=upper, log=log)
+
+
+def candidates(stroke_m: float = 0.06) -> dict[str, EffectCandidate]:
+    """The candidate library, keyed by effect id (see the module docstring).
+
+    Parameters
+    ----------
+    stroke_m : float, default=0.06
+        Cylinder stroke [m] (search range of the load-stiffness reference).
+    """
+    mid = 0.5 * stroke_m
+    return {
+        "spool_overlap": EffectCandidate(
+            "spool_overlap", (_p("spool_overlap", "overlap_m", "m", 0.3, 1e-7, 1e-4, log=True),), {},
+            tuple({"overlap_m": v} for v in (2e-6, 8e-6, 3e-5))),
+        "spool_flow_force": EffectCandidate(
+            "spool_flow_force", (_p("spool_flow_force", "stiffness_ratio", "-", 0.3, 1e-3, 3.0, log=True),), {},
+            tuple({"stiffness_ratio": v} for v in (0.03, 0.15, 0.6))),
+        "rod_friction": EffectCandidate(
+            "rod_friction", (_p("rod_friction", "coulomb_n", "N", 0.3, 1.0, 5000.0, log=True),
+                             _p("rod_friction", "static_ratio", "-", 0.1, 1.0, 3.0)),
+            {"stribeck_velocity_m_s": 0.002, "viscous_n_s_m": 0.0},
+            tuple({"coulomb_n": v, "static_ratio": 1.5} for v in (40.0, 150.0, 500.0))),
+        "lvdt_lag": EffectCandidate(
+            "lvdt_lag", (_p("lvdt_lag", "time_constant_s", "s", 0.3, 1e-4, 0.5, log=True),), {},
+            tuple({"time_constant_s": v} for v in (0.003, 0.012, 0.05))),
+        "load_stiffness": EffectCandidate(
+            "load_stiffness", (_p("load_stiffness", "stiffness_n_m", "N/m", 1e4, -5e5, 5e5),
+                               _p("load_stiffness", "reference_m", "m", 0.005, 0.0, stroke_m)), {},
+            tuple({"stiffness_n_m": v, "reference_m": mid} for v in (-8e4, -2e4, 2e4, 8e4))),
+    }
+
+
+def get_candidates(ids, stroke_m: float = 0.06) -> list[EffectCandidate]:
+    """Candidates by id, in the given order.
+
+    Raises
+    ------
+    UnknownNameError
+        An unknown effect id.
+    """
+    lib = candidates(stroke_m)
+    out = []
+    for i in ids:
+        if i not in lib:
+            raise UnknownNameError(f"Unknown candidate effect '{i}'. Allowed: {', '.join(EFFECT_IDS)}.")
+        out.append(lib[i])
+    return out
+
+
+assert set(candidates()) == set(EFFECT_IDS), "every effect of the library is a candidate"
