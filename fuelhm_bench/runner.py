@@ -188,7 +188,9 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     model, the methods' healthy flights from the scenario's training fleet
     (split into fit and calibration units the same way, restricted to the
     columns of :func:`observation_row`) and, with the physics fidelity, the very
-    same scored flights.
+    same scored flights: simulated once (and cached) for all the methods, then
+    served by the environment (:meth:`ActuationLoopEnv.load_replays
+    <fuelhm_bench.envs.ActuationLoopEnv.load_replays>`).
 
     Parameters
     ----------
@@ -219,8 +221,8 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     EnvEvaluation
     """
     from fuelhm_bench.envs.actuation_loop import ActuationLoopEnv
-    from fuelhm_bench.envs.cache import (KnowledgeSize, published_knowledge, resolve_scenario, surrogate_knowledge,
-                                         training_indicators)
+    from fuelhm_bench.envs.cache import (KnowledgeSize, published_knowledge, resolve_scenario, scored_indicators,
+                                         surrogate_knowledge, training_indicators)
 
     sc = resolve_scenario(scenario)
     if seed is not None:
@@ -246,7 +248,9 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
             env_knowledge = surrogate_knowledge(sc, size=size, drifted=drifted, **common)
         env = ActuationLoopEnv(scenario=scored, fidelity=fidelity, maintenance=False, drifted=drifted,
                                flight_minutes=flight_minutes, knowledge=env_knowledge)
-        env.reset(options={"unit": 0})  # compiles the simulator and builds the scored fleet before any fork
+        if env.fidelity == "physics":  # flights do not depend on the actions: simulate them once for all methods
+            env.load_replays(scored_indicators(sc, units=n_units, drifted=drifted, **common))
+        env.reset(options={"unit": 0})  # builds the scored fleet before any fork
         return EnvEvaluation(scored, env.fidelity, tuple(range(n_units)), knowledge, fit_part, cal_part, env,
                              nominal)
 

@@ -167,6 +167,30 @@ def test_physics_replay_is_the_scenarios_fleet(cache_dir):
         for j, m in enumerate(MODE_IDS):
             np.testing.assert_array_equal(truth["intensity"][:, j], lab[f"intensity_{m}"].to_numpy())
             assert truth["onset"][j] == lab[f"onset_{m}"].iloc[0]
+    served = ActuationLoopEnv(scenario=sc, fidelity="physics", flight_minutes=MINUTES, maintenance=False)
+    served.load_replays(table)  # the same flights, simulated once
+    for k in range(3):
+        live, rewards, info = episode(env, ALARM, options={"unit": k})
+        loaded, rewards2, info2 = episode(served, ALARM, options={"unit": k})
+        for a, b in zip(live, loaded):
+            np.testing.assert_array_equal(a["indicators"], b["indicators"])
+            np.testing.assert_array_equal(a["valid"], b["valid"])
+        assert rewards == rewards2
+        np.testing.assert_array_equal(info["episode_truth"]["cost_kusd"], info2["episode_truth"]["cost_kusd"])
+
+
+def test_load_replays_refuses_what_it_cannot_serve(cache_dir):
+    from fuelhm_bench.envs import scored_indicators
+
+    sc = small_scenario(units=2, flights=3)
+    table = scored_indicators(sc, flight_minutes=MINUTES, cache_dir=cache_dir)
+    with pytest.raises(ParameterError, match="needs fidelity='physics', maintenance=False"):
+        make(cache_dir, sc, "physics", maintenance=True).unwrapped.load_replays(table)
+    with pytest.raises(ParameterError, match="needs fidelity='physics', maintenance=False"):
+        make(cache_dir, sc, "surrogate", maintenance=False).unwrapped.load_replays(table)
+    env = make(cache_dir, sc, "physics", maintenance=False).unwrapped
+    with pytest.raises(ParameterError, match=r"flights 0..2 of each unit. Got \[0, 2\] for unit 1"):
+        env.load_replays(table.drop(index=4))
 
 
 def test_sync_vector_env(cache_dir):

@@ -203,6 +203,13 @@ def test_progress_counts_every_scored_flight(surrogate_eval):
     assert done == [8, 8, 8] and sum(done) == surrogate_eval.n_flights
 
 
+def test_one_call_evaluate_with_progress_bars(cache_dir, tmp_path):
+    outcome = evaluate(IdleCurrent(), tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(),
+                       cache_dir=cache_dir, progress=True)
+    assert outcome.ok and len(outcome.decisions) == 24
+    assert set(outcome.kpis().index) >= {"summary_score", "cost_kusd"}
+
+
 def test_drift_scenario_prepares_the_nominal_fleet(cache_dir):
     evaluation = prepare_evaluation(tiny("robustness_drift", name="drifty"), fidelity="surrogate",
                                     knowledge_size=KnowledgeSize.small(), cache_dir=cache_dir)

@@ -20,9 +20,10 @@ ENV_IDS
     The registered ids.
 ActuationLoopEnv
     The environment class (see its docstring, a manual).
-KnowledgeSize, published_knowledge, training_indicators, surrogate_knowledge, default_cache_dir, clear_memory_cache
-    Cached simulated products: published knowledge, training flights, the surrogate's inputs
-    (:mod:`fuelhm_bench.envs.cache`).
+KnowledgeSize, published_knowledge, training_indicators, scored_indicators, surrogate_knowledge,
+default_cache_dir, clear_memory_cache
+    Cached simulated products: published knowledge, training flights, scored flights, the
+    surrogate's inputs (:mod:`fuelhm_bench.envs.cache`).
 SurrogateModel
     The surrogate fidelity (:mod:`fuelhm_bench.envs.surrogate`).
 """
@@ -32,8 +33,8 @@ from __future__ import annotations
 from gymnasium.envs.registration import register, registry
 
 __all__ = ["ENV_IDS", "ActuationLoopEnv", "KnowledgeSize", "SurrogateModel", "clear_memory_cache",
-           "default_cache_dir", "published_knowledge", "register_envs", "surrogate_knowledge",
-           "training_indicators"]
+           "default_cache_dir", "published_knowledge", "register_envs", "scored_indicators",
+           "surrogate_knowledge", "training_indicators"]
 
 #: Registered environment ids -> entry points (``"module:Class"``, imported on ``make``).
 ENV_IDS: dict[str, str] = {
@@ -48,6 +49,7 @@ _LAZY = {
     "clear_memory_cache": "fuelhm_bench.envs.cache",
     "surrogate_knowledge": "fuelhm_bench.envs.cache",
     "training_indicators": "fuelhm_bench.envs.cache",
+    "scored_indicators": "fuelhm_bench.envs.cache",
     "SurrogateModel": "fuelhm_bench.envs.surrogate",
 }
 

@@ -162,7 +162,9 @@ class ActuationLoopEnv(gym.Env):
     fleet instead (0 <= k < ``fleet.units``), fixed by the scenario's test seed
     whatever the environment's seed: with the physics fidelity its indicators
     are those of :func:`fuelhm_bench.datasets.fleet_indicators` on
-    ``Scenario.test_fleet_config()``. The first observation is the first
+    ``Scenario.test_fleet_config()`` (:meth:`load_replays` serves such flights
+    from a precomputed table, so that many agents are evaluated on flights
+    simulated once). The first observation is the first
     flight's; ``info`` holds ``"flight_index"`` (0) and ``"unit"`` (``k``, or -1
     for a drawn unit).
 
@@ -305,6 +307,44 @@ class ActuationLoopEnv(gym.Env):
                                          "guilt": spaces.Box(0.0, 1.0, (_N_MODES,), np.float32)})
         self._t = -1  # no episode yet
         self._valid_ones = np.ones(len(INDICATOR_NAMES), dtype=np.int8)
+        self._replays: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def load_replays(self, table) -> None:
+        """Serve replayed units from precomputed physics indicators instead of simulating them again.
+
+        Without maintenance a replayed unit's flights do not depend on the
+        actions, so its observations can be simulated once
+        (:func:`fuelhm_bench.envs.cache.scored_indicators`) and shared by every
+        agent or method evaluated; rewards and truth are computed as usual.
+
+        Parameters
+        ----------
+        table : pandas.DataFrame
+            Indicator table of the scored fleet as :func:`fuelhm_bench.datasets.fleet_indicators`
+            returns it for ``test_fleet_config()`` (``unit_id``, ``flight_index``, the
+            indicators, ``<name>_valid``), every flight of each unit it holds.
+
+        Raises
+        ------
+        ParameterError
+            Not the physics fidelity, maintenance on, raw observations on, or a
+            unit's flights incomplete.
+        """
+        if self.fidelity != "physics" or self.maintenance or self.raw:
+            raise ParameterError(f"{type(self).__name__}.load_replays needs fidelity='physics', maintenance=False "
+                                 f"and raw=False (replayed flights must not depend on the actions). Got "
+                                 f"fidelity={self.fidelity!r}, maintenance={self.maintenance}, raw={self.raw}.")
+        replays = {}
+        for unit, rows in table.groupby("unit_id", sort=True):
+            rows = rows.sort_values("flight_index")
+            if rows["flight_index"].tolist() != list(range(self.n_flights)):
+                raise ParameterError(f"The 'table' parameter of {type(self).__name__}.load_replays must hold "
+                                     f"flights 0..{self.n_flights - 1} of each unit. Got "
+                                     f"{rows['flight_index'].tolist()} for unit {unit!r} instead.")
+            valid = rows[[f"{n}_valid" for n in INDICATOR_NAMES]].to_numpy(dtype=bool)
+            values = np.where(valid, rows[list(INDICATOR_NAMES)].to_numpy(dtype=np.float64), 0.0)
+            replays[int(unit)] = (np.clip(values, _LOW, _HIGH).astype(np.float32), valid.astype(np.int8))
+        self._replays = replays
 
     # ------------------------------------------------------------------ episode set-up
     def _scored_fleet(self):
@@ -393,7 +433,11 @@ class ActuationLoopEnv(gym.Env):
         self._active_log.append(self._active)
         if self.surrogate is not None:
             return {"indicators": self._table[t].copy(), "valid": self._valid_ones.copy()}
-        self._last = self._fly(t)
+        replay = self._replays.get(self._unit_id) if self._unit_id >= 0 else None
+        if replay is not None:
+            self._last = {"indicators": replay[0][t], "valid": replay[1][t]}
+        else:
+            self._last = self._fly(t)
         return {k: v.copy() for k, v in self._last.items()}
 
     def _fly(self, t: int) -> dict:

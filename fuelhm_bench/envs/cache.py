@@ -9,7 +9,9 @@ The environments and the runner need, for a scenario:
 * **healthy indicator tables** of the scenario's training fleet
   (:func:`training_indicators`): what methods are fitted on, and, continued to
   more units and flights and with the scored fleet's drift, what the
-  surrogate's healthy Gaussian model is learnt on (:func:`surrogate_knowledge`).
+  surrogate's healthy Gaussian model is learnt on (:func:`surrogate_knowledge`);
+* the **scored fleet's indicators** without maintenance (:func:`scored_indicators`):
+  the physics observations of replayed units, simulated once for all methods.
 
 Each costs from seconds to tens of seconds of simulation. They are kept
 
@@ -48,8 +50,8 @@ import pandas as pd
 from fuelhm_bench.errors import ParameterError
 
 __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
-           "knowledge_build", "published_knowledge", "resolve_scenario", "surrogate_knowledge",
-           "training_indicators"]
+           "knowledge_build", "published_knowledge", "resolve_scenario", "scored_indicators",
+           "surrogate_knowledge", "training_indicators"]
 
 #: Environment variable overriding the default cache directory.
 CACHE_ENV_VAR: str = "FUELHM_BENCH_CACHE"
@@ -202,7 +204,7 @@ def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **par
     Parameters
     ----------
     kind : str
-        ``"knowledge"`` or ``"training"``.
+        ``"knowledge"``, ``"training"`` or ``"scored"``.
     scenario : str, Path or Scenario
     flight_minutes : float or None, default=None
         None and the scenario's own duration give the same key.
@@ -354,6 +356,51 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
 
     table = _cached(key, _entry(cache_dir, "training", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "training", "flight_minutes": flight_minutes, **params})
+    return table.copy()
+
+
+def scored_indicators(scenario, *, flight_minutes: float | None = None, units: int | None = None,
+                      drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
+                      progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+    """Indicator table of the scenario's scored fleet, as flown without maintenance, cached.
+
+    These are the physics observations of ``FuelHM/ActuationLoop-v0`` replaying
+    units ``0 .. units - 1`` with ``maintenance=False``
+    (:meth:`ActuationLoopEnv.load_replays <fuelhm_bench.envs.ActuationLoopEnv.load_replays>`):
+    simulated once, then shared by every method evaluated.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+    flight_minutes : float or None, default=None
+    units : int or None, default=None
+        Number of scored units; None: the scenario's ``fleet.units``.
+    drifted : bool, default=True
+        Whether the fleet carries the scenario's nominal-parameter drift.
+    cache_dir : str, path-like, False or None, default=None
+    progress : callable, optional
+
+    Returns
+    -------
+    pandas.DataFrame
+        The indicator table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
+    """
+    from fuelhm_bench.datasets import fleet_indicators
+
+    sc = resolve_scenario(scenario)
+    _check_minutes(flight_minutes, "scored_indicators")
+    config = _with_minutes(sc.test_fleet_config(), flight_minutes)
+    units = config.n_units if units is None else units
+    drifted = bool(drifted) or not sc.drift
+    config = dataclasses.replace(config, n_units=units, **({} if drifted else {"nominal": sc.truth_model()}))
+    params = {"units": units, "drifted": drifted}
+    key = cache_key("scored", sc, flight_minutes=flight_minutes, **params)
+
+    def make() -> dict[str, pd.DataFrame]:
+        return {"table": fleet_indicators(config, progress=progress)[0]}
+
+    table = _cached(key, _entry(cache_dir, "scored", sc, key), ("table",), make, lambda t: t["table"],
+                    {"scenario": sc.id, "kind": "scored", "flight_minutes": flight_minutes, **params})
     return table.copy()
 
 
