@@ -22,7 +22,7 @@ import pytest
 from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 
-import fuelhm_bench.envs
+import fuelhm_bench.envs  # noqa: F401 - registers the environment ids
 from fuelhm_bench.envs import KnowledgeSize, SurrogateModel
 from fuelhm_bench.envs.actuation_loop import INDICATOR_BOUNDS, ActuationLoopEnv
 from fuelhm_bench.envs.cache import (cache_key, clear_memory_cache, default_cache_dir, published_knowledge,
@@ -357,7 +357,8 @@ def test_surrogate_recovers_the_unit_share_of_the_variance():
     n_units, n_flights, share = 200, 10, np.linspace(0.1, 0.9, 10)
     sd = np.linspace(0.5, 5.0, 10)
     unit = rng.standard_normal((n_units, 10)) * sd * np.sqrt(share)
-    values = (unit[:, None, :] + rng.standard_normal((n_units, n_flights, 10)) * sd * np.sqrt(1 - share)).reshape(-1, 10)
+    flight = rng.standard_normal((n_units, n_flights, 10)) * sd * np.sqrt(1 - share)
+    values = (unit[:, None, :] + flight).reshape(-1, 10)
     table = pd.DataFrame(values + 3.0, columns=list(INDICATOR_NAMES))
     table["unit_id"] = np.repeat(np.arange(n_units), n_flights)
     from fuelhm_bench.diagnosis.healthy import HealthyModel

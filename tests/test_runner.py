@@ -86,7 +86,8 @@ def test_physics_runner_reproduces_the_evaluation_pipeline(cache_dir):
     data, knowledge = scenario_data(sc, doe_units=1)
     evaluation = prepare_evaluation(sc, fidelity="physics", knowledge_size=SIZE, cache_dir=cache_dir)
     columns = list(evaluation.fit_indicators.columns)  # the observation's columns (no n_points, quality_reason)
-    assert columns == ["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *(f"{n}_valid" for n in INDICATOR_NAMES)]
+    assert columns == ["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES,
+                       *(f"{n}_valid" for n in INDICATOR_NAMES)]
     pd.testing.assert_frame_equal(evaluation.fit_indicators, data.fit_indicators[columns])
     pd.testing.assert_frame_equal(evaluation.calibration_indicators, data.calibration_indicators[columns])
     pd.testing.assert_frame_equal(evaluation.knowledge.itl.table, knowledge.itl.table)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from typing import Any
@@ -17,7 +18,7 @@ from fuelhm_bench.envs.surrogate import SurrogateModel
 from fuelhm_bench.errors import DataFormatError, ParameterError
 from fuelhm_bench.flights.fleet import _STREAM_MISSION, _STREAM_NOISE, _STREAM_UNIT, build_units, rng_for
 from fuelhm_bench.flights.schedule import draw_unit_schedule
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, INDICATOR_UNITS, MODE_IDS
+from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 
 __all__ = ["ActuationLoopEnv", "FIDELITIES", "INDICATOR_BOUNDS", "RAW_BOUNDS"]
 
@@ -229,9 +230,10 @@ class ActuationLoopEnv(gym.Env):
     metadata = {"render_modes": [], "render_fps": 1}
 
     def __init__(self, *, scenario="paper_2012", fidelity: str | None = None, maintenance: bool = True,
-                 drifted: bool = True, flight_minutes: float | None = None, raw: bool = False, raw_samples: int = 256, knowledge=None,
-                 knowledge_size=None, cache_dir: str | os.PathLike | bool | None = None,
-                 render_mode: str | None = None, **unknown: Any) -> None:
+                 drifted: bool = True, flight_minutes: float | None = None, raw: bool = False,
+                 raw_samples: int = 256, knowledge=None, knowledge_size=None,
+                 cache_dir: str | os.PathLike | bool | None = None, render_mode: str | None = None,
+                 **unknown: Any) -> None:
         owner = type(self).__name__
         reject_unknown(unknown, _ARGUMENTS, what="argument", owner=owner)
         self.scenario = resolve_scenario(scenario)
@@ -240,7 +242,8 @@ class ActuationLoopEnv(gym.Env):
             fidelity = sc.fidelity
         if fidelity not in FIDELITIES:
             raise ParameterError(f"The 'fidelity' parameter of {owner} must be one of {', '.join(FIDELITIES)} or None "
-                                 f"(the scenario's default). Got {fidelity!r} instead.{did_you_mean(fidelity, FIDELITIES)}")
+                                 f"(the scenario's default). Got {fidelity!r} instead."
+                                 f"{did_you_mean(fidelity, FIDELITIES)}")
         self.fidelity = fidelity
         for name, value in (("maintenance", maintenance), ("drifted", drifted), ("raw", raw)):
             if not isinstance(value, (bool, np.bool_)):
@@ -257,9 +260,9 @@ class ActuationLoopEnv(gym.Env):
             raise ParameterError(f"The 'raw' parameter of {owner} may only be True with fidelity='physics' (the "
                                  f"surrogate draws indicators, not flights). Got raw=True with fidelity={fidelity!r}.")
         shortest = (sc.mission.start_duration_s + 60.0) / 60.0
-        if flight_minutes is not None and not (
-                isinstance(flight_minutes, (int, float, np.integer, np.floating)) and not isinstance(flight_minutes, bool)
-                and math.isfinite(flight_minutes) and flight_minutes >= shortest):
+        number = isinstance(flight_minutes, (int, float, np.integer, np.floating))
+        number = number and not isinstance(flight_minutes, bool)
+        if flight_minutes is not None and not (number and math.isfinite(flight_minutes) and flight_minutes >= shortest):
             raise ParameterError(f"The 'flight_minutes' parameter of {owner} must be None or a number >= "
                                  f"{shortest:g} (engine start {sc.mission.start_duration_s:g} s + 60 s). "
                                  f"Got {flight_minutes!r} instead.")
@@ -272,8 +275,6 @@ class ActuationLoopEnv(gym.Env):
         if knowledge is not None and not all(hasattr(knowledge, a) for a in ("healthy_model", "healthy_table", "itl")):
             raise ParameterError(f"The 'knowledge' parameter of {owner} must be a KnowledgeResult or None. "
                                  f"Got {type(knowledge).__name__} instead.")
-
-        import dataclasses
 
         config = sc.test_fleet_config()
         if not self.drifted:
