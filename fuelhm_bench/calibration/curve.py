@@ -124,3 +124,23 @@ def pooled_curve(i_ma: np.ndarray, v_mm_s: np.ndarray, config: CurveConfig = Cur
     mean, count = vel.binned_mean(i_ma, v_mm_s, config.edges)
     ok = count[0] >= config.min_count
     return config.centres[ok], mean[0][ok], count[0][ok]
+
+
+def gap_noise_floor(rs, v_model: np.ndarray, config: CurveConfig = CurveConfig(), tau: float = 1.0) -> float:
+    """Part of the gap explained by noise alone [mm/s].
+
+    ``sqrt(mean_c (s_c^2 tau / n_c))`` over the cells of the gap, with ``s_c`` the standard
+    deviation of the residuals in cell ``c``, ``n_c`` their number and ``tau`` the residuals'
+    correlation time in samples (:class:`~fuelhm_bench.calibration.discrepancy.NoiseModel`):
+    the RMS standard error of the cell means. A gap within a small multiple of it is noise.
+    """
+    s = rs.scored
+    r = rs.v_meas_mm_s[s] - v_model[s]
+    groups = rs.direction[s].astype(np.int64) + 1
+    mean, count = vel.binned_mean(rs.i_ma[s], r, config.edges, groups, 3)
+    mean2, _ = vel.binned_mean(rs.i_ma[s], r * r, config.edges, groups, 3)
+    ok = count >= config.min_count
+    if not ok.any():
+        return float("nan")
+    var = np.clip(mean2[ok] - mean[ok] ** 2, 0.0, None) * count[ok] / np.maximum(count[ok] - 1, 1)
+    return float(np.sqrt(np.mean(var * max(tau, 1.0) / count[ok])))

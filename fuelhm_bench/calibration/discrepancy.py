@@ -45,7 +45,7 @@ import numpy as np
 
 from fuelhm_bench.calibration import replay as rp
 from fuelhm_bench.calibration.candidates import EffectCandidate, get_candidates
-from fuelhm_bench.calibration.curve import CurveConfig, gap, gap_metric_text
+from fuelhm_bench.calibration.curve import CurveConfig, gap, gap_metric_text, gap_noise_floor
 from fuelhm_bench.calibration.fit import FitParameter, JointFit, apply_values, fit_joint
 from fuelhm_bench.calibration.recalibrate import (
     NO_UNIT,
@@ -62,6 +62,10 @@ from fuelhm_bench.calibration.regions import RegionMap, region_map, sample_level
 from fuelhm_bench.errors import DataFormatError, range_error
 from fuelhm_bench.physics.effects import effect_parameters
 from fuelhm_bench.taxonomy import EFFECT_IDS
+
+#: Misfit score (mean z^2 of the curve cells, :mod:`~fuelhm_bench.calibration.regions`) of the
+#: recalibrated model on the held-out flights above which a disagreement is reported as significant.
+SIGNIFICANT_SCORE = 3.0
 
 #: Units of the effect parameters (for reports and JSON).
 PARAMETER_UNITS: dict[str, str] = {
@@ -266,6 +270,10 @@ class DiscrepancyResult:
         Definition of the gap.
     gap_before, gap_recalibrated, gap_after : float
         Held-out gap [mm/s]: input model, recalibrated model, recalibrated + named effect.
+    gap_floor : float
+        Noise floor of the held-out gap of the final model [mm/s]
+        (:func:`~fuelhm_bench.calibration.curve.gap_noise_floor`): a ``gap_after`` near it
+        leaves nothing but noise to explain.
     ranking : tuple of CandidateOutcome
         All candidates and ``none``, by increasing BIC.
     model : LoopModel
@@ -303,6 +311,7 @@ class DiscrepancyResult:
     gap_before: float
     gap_recalibrated: float
     gap_after: float
+    gap_floor: float
     ranking: tuple
     model: object
     recalibrated_model: object
@@ -330,11 +339,15 @@ class DiscrepancyResult:
             "effect": self.effect,
             "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")} for k, v in self.parameters.items()},
             "region": self.region,
+            "region_levels": [{"factor": lv.factor, "level": lv.level, "samples": lv.count, "score": lv.score,
+                               "local_gap": lv.local_gap_mm_s}
+                              for lv in self.maps["recalibrated"].ranked()[:5]],
             "gap_metric": self.gap_metric,
             "gap_before": self.gap_before,
             "gap_recalibrated": self.gap_recalibrated,
             "gap_after": self.gap_after,
             "gap_reduction": self.gap_reduction,
+            "gap_noise_floor": self.gap_floor,
             "ranking": [c.as_json() for c in self.ranking],
             "decision_rule": self.decision_rule,
             "noise_model": {"n": self.noise.n, "tau_samples": self.noise.tau, "n_eff": self.noise.n_eff,
@@ -626,14 +639,19 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         eff_params = dict(effect_parameters(final_model.effect(chosen)))
     fleet_models = {k: (base.unit_models.get(k, fleet0)) for k in held_sets}
     levels = sample_levels(held, fleet_models, lambda fi: NO_UNIT if held.unit_ids[fi] is None else held.unit_ids[fi])
-    maps = {"input": region_map(held, v_input, levels, cal.curve),
-            "recalibrated": region_map(held, v_recal, levels, cal.curve),
-            "augmented": region_map(held, v_after, levels, cal.curve)}
+    maps = {"input": region_map(held, v_input, levels, cal.curve, noise.tau),
+            "recalibrated": region_map(held, v_recal, levels, cal.curve, noise.tau),
+            "augmented": region_map(held, v_after, levels, cal.curve, noise.tau)}
+    floor = gap_noise_floor(held, v_after, cal.curve, noise.tau)
     region = maps["recalibrated"].concentration()
+    if not maps["recalibrated"].score > SIGNIFICANT_SCORE:
+        region = (f"no significant disagreement (misfit score {maps['recalibrated'].score:.2g} over the held-out "
+                  f"curve, noise gives about 1); largest local misfit: {region}")
     say(f"decision: {chosen}; held-out gap {g_before:.3f} -> {g_recal:.3f} (recalibrated) -> {g_after:.3f} mm/s")
     return DiscrepancyResult(
         effect=chosen, parameters=eff_params, region=region, gap_metric=gap_metric_text(cal.curve),
-        gap_before=g_before, gap_recalibrated=g_recal, gap_after=g_after, ranking=ranking, model=final_model,
+        gap_before=g_before, gap_recalibrated=g_recal, gap_after=g_after, gap_floor=floor, ranking=ranking,
+        model=final_model,
         recalibrated_model=fleet0, start_model=start, noise=noise, maps=maps, heldout=held,
         v_heldout={"input": v_input, "recalibrated": v_recal, "augmented": v_after},
         fit_flights=tuple(f.flight_id for f in fit_flights), heldout_flights=tuple(f.flight_id for f in held_flights),

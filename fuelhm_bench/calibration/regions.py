@@ -17,11 +17,15 @@ N2              ``< 70 %``, ``70-90 %``, ``>= 90 %`` (supply pressure ~ N2^2)
 flight phase    the file's ``phase`` names (when present)
 ==============  ==============================================================================
 
-For each level the map holds the sample count, the mean and RMS residual, and the *local
-gap*: the gap metric (:mod:`~fuelhm_bench.calibration.curve`) restricted to the level's
-samples, i.e. how far the model's curve is from the measured one in that region. The
-disagreement *concentrates* where the local gap is largest relative to the gap over all
-samples (levels holding less than ``min_share`` of the samples are not named).
+For each level the map holds the sample count, the mean and RMS residual, the *local gap*
+(the gap metric of :mod:`~fuelhm_bench.calibration.curve` restricted to the level's samples:
+how far the model's curve is from the measured one in that region) and the *misfit score*:
+the mean over the level's curve cells of ``z_c^2``, with ``z_c`` the cell's mean residual
+divided by its standard error (``s_c sqrt(tau / n_c)``, ``tau`` the residuals' correlation
+time). A score near 1 is noise; the disagreement *concentrates* in the levels with the
+largest score (levels holding less than ``min_share`` of the samples are not named). The
+score, unlike the local gap, discounts sparse noisy cells (e.g. a few samples at the current
+limit) and weighs consistent offsets over many samples.
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fuelhm_bench.calibration import velocity as vel
-from fuelhm_bench.calibration.curve import CurveConfig, cell_residuals
+from fuelhm_bench.calibration.curve import CurveConfig
 
 FACTORS: tuple[str, ...] = ("current band", "direction", "velocity", "position", "N2", "flight phase")
 
@@ -50,6 +54,8 @@ class RegionLevel:
         Mean and RMS residual (measured - model) [mm/s].
     local_gap_mm_s : float
         Gap metric restricted to the level's samples [mm/s] (NaN if no cell is populated).
+    score : float
+        Misfit score: mean ``z^2`` over the level's cells [-] (NaN if no cell is populated).
     """
 
     factor: str
@@ -58,6 +64,7 @@ class RegionLevel:
     mean_mm_s: float
     rms_mm_s: float
     local_gap_mm_s: float
+    score: float
 
 
 @dataclass(frozen=True)
@@ -69,12 +76,15 @@ class RegionMap:
     levels : tuple of RegionLevel
     gap_mm_s : float
         Gap metric over all samples [mm/s].
+    score : float
+        Misfit score over all samples [-].
     count : int
         Scored samples.
     """
 
     levels: tuple
     gap_mm_s: float
+    score: float
     count: int
 
     def level(self, factor: str, level: str) -> RegionLevel | None:
@@ -85,23 +95,23 @@ class RegionMap:
         return None
 
     def ranked(self, *, min_share: float = 0.05) -> list[RegionLevel]:
-        """Levels by decreasing local gap, among those with at least ``min_share`` of the samples."""
-        ok = [lv for lv in self.levels if lv.count >= min_share * max(self.count, 1) and np.isfinite(lv.local_gap_mm_s)]
-        return sorted(ok, key=lambda lv: -lv.local_gap_mm_s)
+        """Levels by decreasing misfit score, among those with at least ``min_share`` of the samples."""
+        ok = [lv for lv in self.levels if lv.count >= min_share * max(self.count, 1) and np.isfinite(lv.score)]
+        return sorted(ok, key=lambda lv: -lv.score)
 
     def concentration(self, *, min_share: float = 0.05, n_top: int = 2) -> str:
-        """Name of the region(s) where the disagreement concentrates, e.g. ``"current band: null region (x2.1)"``.
+        """Name of the region(s) where the disagreement concentrates.
 
-        One level per factor at most, the ``n_top`` levels with the largest local gap relative to
-        the overall gap.
+        The ``n_top`` levels (one per factor at most) with the largest misfit score, e.g.
+        ``"current band: null region (score 41 vs 12 overall, local gap 0.52 mm/s)"``.
         """
         seen, names = set(), []
         for lv in self.ranked(min_share=min_share):
             if lv.factor in seen:
                 continue
             seen.add(lv.factor)
-            ratio = lv.local_gap_mm_s / self.gap_mm_s if self.gap_mm_s > 0 else float("nan")
-            names.append(f"{lv.factor}: {lv.level} (local gap {lv.local_gap_mm_s:.2f} mm/s, x{ratio:.1f})")
+            names.append(f"{lv.factor}: {lv.level} (score {lv.score:.3g} vs {self.score:.3g} overall, "
+                         f"local gap {lv.local_gap_mm_s:.2f} mm/s)")
             if len(names) == n_top:
                 break
         return "; ".join(names) if names else "nowhere in particular"
@@ -167,8 +177,20 @@ def sample_levels(rs, unit_models: dict, unit_of_flight, *, idle_halfwidth_ma: f
     return out
 
 
-def region_map(rs, v_model: np.ndarray, levels: dict[str, np.ndarray], curve: CurveConfig = CurveConfig()
-               ) -> RegionMap:
+def _cell_stats(i, r, groups, curve: CurveConfig, tau: float) -> tuple[float, float]:
+    """(gap, mean z^2) over the populated cells of some samples."""
+    m, c = vel.binned_mean(i, r, curve.edges, groups, 3)
+    m2, _ = vel.binned_mean(i, r * r, curve.edges, groups, 3)
+    good = c >= curve.min_count
+    if not good.any():
+        return float("nan"), float("nan")
+    var = np.clip(m2[good] - m[good] ** 2, 1e-12, None) * c[good] / np.maximum(c[good] - 1, 1)
+    z2 = m[good] ** 2 / (var * max(tau, 1.0) / c[good])
+    return float(np.sqrt(np.mean(m[good] ** 2))), float(np.mean(z2))
+
+
+def region_map(rs, v_model: np.ndarray, levels: dict[str, np.ndarray], curve: CurveConfig = CurveConfig(),
+               tau: float = 1.0) -> RegionMap:
     """Residual statistics per factor level (see the module docstring).
 
     Parameters
@@ -181,23 +203,21 @@ def region_map(rs, v_model: np.ndarray, levels: dict[str, np.ndarray], curve: Cu
         From :func:`sample_levels`.
     curve : CurveConfig
         Cells of the gap metric.
+    tau : float, default=1.0
+        Correlation time of the residuals [samples] (standard errors of the cell means).
     """
     s = rs.scored
     r = rs.v_meas_mm_s[s] - v_model[s]
-    mean_all, count_all = cell_residuals(rs, v_model, curve)
-    ok = count_all >= curve.min_count
-    gap_all = float(np.sqrt(np.mean(mean_all[ok] ** 2))) if ok.any() else float("nan")
     i = rs.i_ma[s]
     groups = rs.direction[s].astype(np.int64) + 1
+    gap_all, score_all = _cell_stats(i, r, groups, curve, tau)
     out = []
     for factor, names in levels.items():
         for name in sorted(set(names.tolist())):
             sel = names == name
             if not sel.any():
                 continue
-            m, c = vel.binned_mean(i[sel], r[sel], curve.edges, groups[sel], 3)
-            good = c >= curve.min_count
-            lg = float(np.sqrt(np.mean(m[good] ** 2))) if good.any() else float("nan")
+            lg, sc = _cell_stats(i[sel], r[sel], groups[sel], curve, tau)
             out.append(RegionLevel(factor, str(name), int(sel.sum()), float(np.mean(r[sel])),
-                                   float(np.sqrt(np.mean(r[sel] ** 2))), lg))
-    return RegionMap(tuple(out), gap_all, int(r.shape[0]))
+                                   float(np.sqrt(np.mean(r[sel] ** 2))), lg, sc))
+    return RegionMap(tuple(out), gap_all, score_all, int(r.shape[0]))

@@ -1,0 +1,94 @@
+"""``fuelhm-bench discrepancy``: which physical effect is the model missing?"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(sub) -> None:
+    from fuelhm_bench.taxonomy import EFFECT_IDS
+
+    p = sub.add_parser(
+        "discrepancy", help="find the effect a model misses on measured healthy flights (model-discrepancy workflow)",
+        description="Split the flights into fit and held-out flights, recalibrate the model per unit on the fit "
+                    "flights, replay every flight through it to map where model and measurement disagree, fit "
+                    "each candidate effect of the library jointly with the recalibration, rank the candidates by "
+                    "BIC and accept the best only if it also shrinks the gap on the held-out flights; the answer "
+                    "is an effect id or 'none'. --out DIR writes a Markdown report with figures and the augmented "
+                    "model (YAML, loadable by 'simulate --model'); --json prints one JSON object on stdout.")
+    p.add_argument("flights", help="measured healthy flights (.parquet, .csv, .csv.gz; DATA.md format)")
+    p.add_argument("--model", metavar="YAML", help="model to examine (default: nominal)")
+    p.add_argument("--out", metavar="DIR", help="write report.md, figures, result.json and augmented_model.yaml here")
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout (logs on stderr)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the fit/held-out split and sample draws (default 0)")
+    p.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
+                   help="share of the flights held out (default 0.3)")
+    p.add_argument("--candidates", default=",".join(EFFECT_IDS), metavar="IDS",
+                   help="comma-separated candidate effects (default: all)")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes for the candidate fits (default 2)")
+    p.add_argument("--force", action="store_true", help="overwrite existing files in --out")
+    p.set_defaults(func=run)
+
+
+OUTPUT_FILES = ("report.md", "augmented_model.yaml", "result.json", "curves.png", "residual_map.png", "regions.png")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy
+    from fuelhm_bench.calibration.report import json_text, write_discrepancy_report
+    from fuelhm_bench.cli._common import check_output_dir, progress_bar
+    from fuelhm_bench.errors import OutputPathError, ParameterError
+    from fuelhm_bench.io import read_flights, split_flights
+    from fuelhm_bench.physics.model import load_model, save_model
+
+    if args.seed < 0:
+        raise ParameterError(f"--seed must be an integer >= 0. Got {args.seed} instead.")
+    if args.jobs < 1:
+        raise ParameterError(f"--jobs must be an integer >= 1. Got {args.jobs} instead.")
+    candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
+    config = DiscrepancyConfig(holdout_fraction=args.holdout, candidates=candidates, n_jobs=args.jobs,
+                               seed=args.seed)
+    out_dir = None
+    if args.out:
+        out_dir = check_output_dir(args.out)
+        existing = [name for name in OUTPUT_FILES if (Path(out_dir) / name).exists()]
+        if existing and not args.force:
+            raise OutputPathError(f"{out_dir} already holds {', '.join(existing)}; refusing to overwrite "
+                                  "(pass --force).")
+    model = load_model(args.model) if args.model else None
+    flights, rejected = split_flights(read_flights(args.flights), source=str(args.flights))
+    for r in rejected:
+        print(f"warning: {r}", file=sys.stderr)
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr)
+
+    with progress_bar(1 + len(candidates), "fitting", unit="fit") as bar:
+        result = find_discrepancy(flights, model, config=config, progress=bar.update, log=log)
+    payload = result.as_json()
+    if out_dir is not None:
+        model_path = Path(out_dir) / "augmented_model.yaml"
+        save_model(result.model, model_path, overwrite=True,
+                   header=f"fuelhm-bench discrepancy {args.flights}: effect {result.effect}; held-out gap "
+                          f"{result.gap_before:.3f} -> {result.gap_after:.3f} mm/s")
+        report = write_discrepancy_report(result, out_dir, model_file=str(model_path), data_name=str(args.flights))
+        payload["model_file"] = str(model_path)
+        payload["report"] = str(report)
+        log(f"wrote {report} and {model_path}")
+    if args.json:
+        print(json_text(payload))
+    else:
+        print(f"effect: {result.effect}")
+        for k, v in result.parameters.items():
+            print(f"  {k} = {v:.5g}")
+        print(f"region: {result.region}")
+        print(f"held-out gap: {result.gap_before:.3f} (input) -> {result.gap_recalibrated:.3f} (recalibrated) -> "
+              f"{result.gap_after:.3f} mm/s ({100 * result.gap_reduction:.0f} % smaller)")
+        print("ranking (BIC, dBIC vs none, held-out gap):")
+        for c in result.ranking:
+            print(f"  {c.effect:18s} {c.bic:12.1f} {c.delta_bic:10.1f} {c.gap_after:8.3f}"
+                  f"{'  eligible' if c.eligible else ''}")
+    return 0
