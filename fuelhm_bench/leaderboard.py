@@ -1,8 +1,8 @@
 """Evaluate several methods on one or several scenarios and rank them (the leaderboard).
 
-:func:`evaluate_methods` is the shared core of ``fuelhm-bench evaluate`` and
-``fuelhm-bench leaderboard``: it runs every method safely
-(:func:`~fuelhm_bench.evaluation.run_method`), scores the ones that worked, writes
+:func:`evaluate_method` is the shared core of ``fuelhm-bench evaluate`` and
+``fuelhm-bench leaderboard``: it runs every method safely through the environment
+(:func:`~fuelhm_bench.runner.run_in_env`), scores the ones that worked, writes
 their tables and figures, and returns one summary entry per method (status,
 hyperparameters, headline KPIs, robustness when the scenario drifts). A
 leaderboard configuration (``leaderboard/methods.yaml``) lists methods and
@@ -66,43 +66,48 @@ def prepare_methods(specs: list[tuple[str, dict]], shared_params: dict | None = 
     return methods, errors
 
 
-def evaluate_methods(methods, data, out: Path, *, method_seed: int = 0, timeout_s: float = 600.0,
-                     log: Callable[[str], object] = lambda s: print(s, file=sys.stderr)) -> list[dict]:
-    """Run, score and write every method; one summary entry per method."""
-    from fuelhm_bench.evaluation import run_method, score_outcome
-    from fuelhm_bench.scoring import (Run, headline_kpis, plot_score_distributions, robustness, robustness_table,
+def evaluate_method(spec: str, method, evaluation, out: Path, *, method_seed: int = 0, timeout_s: float = 600.0,
+                    progress_factory=None, log: Callable[[str], object] = lambda s: print(s, file=sys.stderr)) -> dict:
+    """Run one method through the environment (:func:`fuelhm_bench.runner.run_in_env`), score it, write its files.
+
+    Returns its summary entry: status, hyperparameters, headline KPIs, cost under the scenario's cost
+    model, robustness (for a drifting scenario), or the failure message.
+    """
+    from fuelhm_bench.runner import run_in_env
+    from fuelhm_bench.scoring import (headline_kpis, plot_score_distributions, robustness, robustness_table,
                                       save_figure, write_tables)
 
-    summary = []
-    for spec, method in methods:
-        outcome = run_method(method, data, random_state=method_seed, timeout_s=timeout_s)
-        entry = {"method": spec, "params": {k: repr(v) for k, v in method.get_params().items()},
-                 "status": outcome.status, "seconds": round(outcome.seconds, 2)}
-        mdir = Path(out) / slug(spec)
-        if outcome.ok:
-            card = score_outcome(outcome, data)
-            write_tables(card, mdir, overwrite=True)
-            run = Run(labels=data.test_labels, decisions=outcome.decisions, healthy_scores=outcome.healthy_scores,
-                      name=spec)
-            save_figure(plot_score_distributions(run, card.config), mdir / "score_distributions.png")
-            outcome.decisions.to_csv(mdir / "decisions.csv", index=False)
-            kpis = headline_kpis(card)
-            if data.nominal is not None:  # robustness: same method, same fleet without the drift
-                nom = run_method(method, data.nominal, random_state=method_seed, timeout_s=timeout_s)
-                if nom.ok:
-                    nom_card = score_outcome(nom, data.nominal)
-                    kpis["robustness"] = robustness(nom_card, card)
-                    robustness_table(nom_card, card).to_csv(mdir / "robustness.csv", index=False)
-                else:
-                    entry["robustness_message"] = f"nominal run {nom.status}: {nom.message.splitlines()[0]}"
-            entry["kpis"] = {k: (None if v != v else float(v)) for k, v in kpis.items()}
-            log(f"{spec}: ok in {outcome.seconds:.1f} s; "
-                + ", ".join(f"{k}={v:.3g}" for k, v in kpis.items() if v == v))
+    if progress_factory is not None:
+        with progress_factory(evaluation.n_flights, f"{spec} ({evaluation.fidelity})") as bar:
+            outcome = run_in_env(method, evaluation, random_state=method_seed, timeout_s=timeout_s,
+                                 progress=bar.update)
+    else:
+        outcome = run_in_env(method, evaluation, random_state=method_seed, timeout_s=timeout_s)
+    entry = {"method": spec, "params": {k: repr(v) for k, v in method.get_params().items()},
+             "status": outcome.status, "seconds": round(outcome.seconds, 2)}
+    if not outcome.ok:
+        entry["message"] = outcome.message
+        log(f"{spec}: {outcome.status.upper()}: {outcome.message.splitlines()[0] if outcome.message else ''}")
+        return entry
+    card = outcome.score()
+    mdir = Path(out) / slug(spec)
+    write_tables(card, mdir, overwrite=True)
+    save_figure(plot_score_distributions(outcome.run(spec), card.config), mdir / "score_distributions.png")
+    outcome.decisions.to_csv(mdir / "decisions.csv", index=False)
+    outcome.episodes.to_csv(mdir / "episodes.csv", index=False)
+    kpis = headline_kpis(card)
+    kpis["cost_kusd"] = outcome.cost_kusd
+    if evaluation.nominal is not None:  # robustness: same method, same fleet without the drift
+        nom = run_in_env(method, evaluation.nominal, random_state=method_seed, timeout_s=timeout_s)
+        if nom.ok:
+            nom_card = nom.score()
+            kpis["robustness"] = robustness(nom_card, card)
+            robustness_table(nom_card, card).to_csv(mdir / "robustness.csv", index=False)
         else:
-            entry["message"] = outcome.message
-            log(f"{spec}: {outcome.status.upper()}: {outcome.message.splitlines()[0] if outcome.message else ''}")
-        summary.append(entry)
-    return summary
+            entry["robustness_message"] = f"nominal run {nom.status}: {nom.message.splitlines()[0]}"
+    entry["kpis"] = {k: (None if v != v else float(v)) for k, v in kpis.items()}
+    log(f"{spec}: ok in {outcome.seconds:.1f} s; " + ", ".join(f"{k}={v:.3g}" for k, v in kpis.items() if v == v))
+    return entry
 
 
 def summary_table(summary: list[dict]) -> pd.DataFrame:
@@ -110,16 +115,20 @@ def summary_table(summary: list[dict]) -> pd.DataFrame:
     return pd.DataFrame([{"method": e["method"], "status": e["status"], **(e.get("kpis") or {})} for e in summary])
 
 
-def write_evaluation_report(out: Path, scenario_id: str, data, summary: list[dict], meta: dict) -> pd.DataFrame:
-    """Write ``summary.json`` and ``report.md`` for one scenario; returns the summary table."""
+def write_evaluation_report(out: Path, scenario_id: str, counts: dict, summary: list[dict], meta: dict) -> pd.DataFrame:
+    """Write ``summary.json`` and ``report.md`` for one scenario; returns the summary table.
+
+    ``counts`` holds ``test``, ``fit`` and ``calibration``: numbers of flights.
+    """
     from fuelhm_bench.scoring import to_markdown
 
     out = Path(out)
-    (out / "summary.json").write_text(json.dumps({"scenario": scenario_id, **meta, "methods": summary}, indent=2))
+    (out / "summary.json").write_text(json.dumps({"scenario": scenario_id, **meta, "flights": counts,
+                                                  "methods": summary}, indent=2))
     table = summary_table(summary)
     lines = [f"# Evaluation on `{scenario_id}`", "",
-             f"{len(data.test_indicators)} test flights, {len(data.fit_indicators)} healthy fitting flights, "
-             f"{len(data.calibration_indicators)} healthy calibration flights (threshold setting).", "",
+             f"{counts['test']} scored flights ({meta.get('fidelity', 'physics')} fidelity), {counts['fit']} healthy "
+             f"fitting flights, {counts['calibration']} healthy calibration flights (threshold setting).", "",
              to_markdown(table.round(4)), ""]
     for e in summary:
         msg = e.get("message", "").splitlines()[0] if e.get("message") else ""
@@ -127,6 +136,12 @@ def write_evaluation_report(out: Path, scenario_id: str, data, summary: list[dic
     lines += ["", "Per-method tables: one directory per method (CSV, Markdown, LaTeX).", ""]
     (out / "report.md").write_text("\n".join(lines))
     return table
+
+
+def evaluation_counts(evaluation) -> dict:
+    """Flight counts of an evaluation, for reports."""
+    return {"test": evaluation.n_flights, "fit": len(evaluation.fit_indicators),
+            "calibration": len(evaluation.calibration_indicators)}
 
 
 @dataclass(frozen=True)
@@ -152,6 +167,8 @@ class LeaderboardConfig:
         Multiplies the number of test units.
     timeout_s : float, default=900.0
         Time limit per method and scenario.
+    fidelity : {"physics", "surrogate"} or None, default=None
+        None: each scenario's own.
     """
 
     methods: tuple
@@ -159,6 +176,7 @@ class LeaderboardConfig:
     seeds: tuple = (None,)
     scale: float = 1.0
     timeout_s: float = 900.0
+    fidelity: str | None = None
 
     @classmethod
     def from_yaml(cls, path) -> LeaderboardConfig:
@@ -170,7 +188,7 @@ class LeaderboardConfig:
             raise ScenarioError(f"{path}: cannot read the leaderboard file: {exc}") from None
         if not isinstance(data, dict):
             raise ScenarioError(f"{path}: a leaderboard file is a mapping with 'methods' and 'scenarios'.")
-        allowed = {"methods", "scenarios", "seeds", "scale", "timeout_s"}
+        allowed = {"methods", "scenarios", "seeds", "scale", "timeout_s", "fidelity"}
         for key in data:
             if key not in allowed:
                 import difflib
@@ -193,14 +211,17 @@ class LeaderboardConfig:
         scenarios = data.get("scenarios") or []
         if not methods or not scenarios:
             raise ScenarioError(f"{path}: 'methods' and 'scenarios' must both be non-empty lists.")
+        fidelity = data.get("fidelity")
+        if fidelity not in (None, "physics", "surrogate"):
+            raise ScenarioError(f"{path}: fidelity must be one of physics, surrogate or null. Got {fidelity!r} instead.")
         return cls(tuple(methods), tuple(str(s) for s in scenarios), tuple(data.get("seeds") or [None]),
-                   float(data.get("scale", 1.0)), float(data.get("timeout_s", 900.0)))
+                   float(data.get("scale", 1.0)), float(data.get("timeout_s", 900.0)), fidelity)
 
 
-def run_leaderboard(config: LeaderboardConfig, out: Path, *, progress_factory=None,
+def run_leaderboard(config: LeaderboardConfig, out: Path, *, progress_factory=None, cache_dir=None,
                     log: Callable[[str], object] = lambda s: print(s, file=sys.stderr)) -> pd.DataFrame:
-    """Evaluate every method on every scenario and seed; write and return the ranked leaderboard."""
-    from fuelhm_bench.evaluation import scenario_data
+    """Evaluate every method on every scenario and seed through the environment; write and return the ranking."""
+    from fuelhm_bench.runner import prepare_evaluation
     from fuelhm_bench.scenarios import load_scenario
     from fuelhm_bench.scoring import to_markdown
 
@@ -210,28 +231,26 @@ def run_leaderboard(config: LeaderboardConfig, out: Path, *, progress_factory=No
         sc = load_scenario(scenario)
         for seed in config.seeds:
             t0 = time.perf_counter()
-            if progress_factory is not None:
-                n = (sc.training_fleet_config().n_units * sc.training_fleet_config().n_flights
-                     + sc.test_fleet_config().n_units * sc.test_fleet_config().n_flights)
-                with progress_factory(n, f"{sc.id} seed {seed}") as bar:
-                    data, _ = scenario_data(sc, seed=seed, scale=config.scale, progress=bar.update)
-            else:
-                data, _ = scenario_data(sc, seed=seed, scale=config.scale)
+            evaluation = prepare_evaluation(sc, fidelity=config.fidelity, seed=seed, scale=config.scale,
+                                            cache_dir=cache_dir)
             sdir = out / f"{sc.id}-seed{seed if seed is not None else sc.seeds.master}"
             sdir.mkdir(parents=True, exist_ok=True)
             methods, errors = prepare_methods([(m.method, dict(m.params)) for m in config.methods], log=log)
-            summary = errors + evaluate_methods(methods, data, sdir, timeout_s=config.timeout_s, log=log)
-            write_evaluation_report(sdir, sc.id, data, summary, {"seed": seed,
-                                                                 "data_seconds": round(time.perf_counter() - t0, 1)})
+            summary = errors + [evaluate_method(spec, m, evaluation, sdir, timeout_s=config.timeout_s,
+                                                progress_factory=progress_factory, log=log) for spec, m in methods]
+            write_evaluation_report(sdir, sc.id, evaluation_counts(evaluation), summary,
+                                    {"seed": seed, "fidelity": evaluation.fidelity,
+                                     "seconds": round(time.perf_counter() - t0, 1)})
             for e in summary:
                 rows.append({"scenario": sc.id, "seed": seed if seed is not None else sc.seeds.master,
-                             "method": e["method"], "status": e["status"], **(e.get("kpis") or {})})
+                             "fidelity": evaluation.fidelity, "method": e["method"], "status": e["status"],
+                             **(e.get("kpis") or {})})
     board = pd.DataFrame(rows)
     if "summary_score" in board:
         board = board.sort_values(["scenario", "summary_score"], ascending=[True, False], na_position="last")
     board.to_csv(out / "leaderboard.csv", index=False)
     cols = [c for c in ("scenario", "seed", "method", "status", "summary_score", "fpr_standard_thr",
-                        "fnr_standard_thr", "fcr", "delay_censored_mean", "robustness") if c in board]
+                        "fnr_standard_thr", "fcr", "delay_censored_mean", "cost_kusd", "robustness") if c in board]
     (out / "leaderboard.md").write_text("# Leaderboard\n\nRanked by summary score (null method = 0, perfect = 100; "
                                         "docs/scoring.md).\n\n" + to_markdown(board[cols].round(3)) + "\n")
     return board

@@ -34,3 +34,17 @@ def _tiny_scenario(tmp_path, name="tiny", base="paper_2012"):
 def tiny_scenario():
     """Factory: ``tiny_scenario(tmp_path, name="tiny", base="paper_2012") -> Path`` of a shrunk scenario."""
     return _tiny_scenario
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _isolated_cache(tmp_path_factory):
+    """Keep the simulation cache of the environment and runner out of the user's home directory."""
+    import os
+
+    previous = os.environ.get("FUELHM_BENCH_CACHE")
+    os.environ["FUELHM_BENCH_CACHE"] = str(tmp_path_factory.mktemp("fuelhm-cache"))
+    yield
+    if previous is None:
+        os.environ.pop("FUELHM_BENCH_CACHE", None)
+    else:
+        os.environ["FUELHM_BENCH_CACHE"] = previous

@@ -16,7 +16,7 @@ from fuelhm_bench.envs._validation import did_you_mean, reject_unknown
 from fuelhm_bench.envs.cache import KnowledgeSize, resolve_scenario, surrogate_knowledge
 from fuelhm_bench.envs.surrogate import SurrogateModel
 from fuelhm_bench.errors import DataFormatError, ParameterError
-from fuelhm_bench.flights.fleet import _STREAM_MISSION, _STREAM_NOISE, _STREAM_UNIT, build_units, rng_for
+from fuelhm_bench.flights.fleet import build_units, mission_rng, noise_rng, rng_for, unit_rng
 from fuelhm_bench.flights.schedule import draw_unit_schedule
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 
@@ -420,7 +420,7 @@ class ActuationLoopEnv(gym.Env):
         elif self._model is None:
             from fuelhm_bench.physics.model import manufacture
 
-            self._model = manufacture(config.nominal, rng_for(self._seed, _STREAM_UNIT, self._slot), config.dispersion)
+            self._model = manufacture(config.nominal, unit_rng(self._seed, self._slot), config.dispersion)
         self._t = 0
         obs = self._observe(0)
         info = {"flight_index": 0, "unit": self._unit_id}
@@ -451,8 +451,8 @@ class ActuationLoopEnv(gym.Env):
                            if active >> MODE_IDS.index(s.mode) & 1 else 0.0)
                   for s in self._schedule.schedules}
         model = self._model.degraded(intens)
-        inputs = self._config.mission.sample(rng_for(self._seed, _STREAM_MISSION, self._slot, t))
-        noise = rng_for(self._seed, _STREAM_NOISE, self._slot, t)
+        inputs = self._config.mission.sample(mission_rng(self._seed, self._slot, t))
+        noise = noise_rng(self._seed, self._slot, t)
         where = f"unit {self._unit_id}, flight {t}" if self._unit_id >= 0 else f"drawn unit, flight {t}"
         out = simulate([model], [inputs], [noise], labels=[where])[0]
         current_ma = out.current_a * 1e3

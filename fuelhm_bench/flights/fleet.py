@@ -30,6 +30,21 @@ def rng_for(seed: int, stream: int, *keys: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), int(stream), *map(int, keys)]))
 
 
+def unit_rng(seed: int, unit: int) -> np.random.Generator:
+    """Generator of a unit's manufacturing and degradation schedule (as :func:`build_units` uses it)."""
+    return rng_for(seed, _STREAM_UNIT, unit)
+
+
+def mission_rng(seed: int, unit: int, flight: int) -> np.random.Generator:
+    """Generator of a flight's operating conditions (as :func:`iter_flights` uses it)."""
+    return rng_for(seed, _STREAM_MISSION, unit, flight)
+
+
+def noise_rng(seed: int, unit: int, flight: int) -> np.random.Generator:
+    """Generator of a flight's sensor noise (as :func:`iter_flights` uses it)."""
+    return rng_for(seed, _STREAM_NOISE, unit, flight)
+
+
 @dataclass(frozen=True)
 class FleetConfig:
     """What to simulate.
@@ -111,7 +126,7 @@ def build_units(config: FleetConfig) -> list[Unit]:
     """Manufacture the units and draw their degradation schedules."""
     units = []
     for u in range(config.n_units):
-        rng = rng_for(config.seed, _STREAM_UNIT, u)
+        rng = unit_rng(config.seed, u)
         model = manufacture(config.nominal, rng, config.dispersion)
         sched = draw_unit_schedule(config.schedules, rng, simultaneous=config.simultaneous)
         units.append(Unit(u, model, sched))
@@ -142,8 +157,8 @@ def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None) ->
             it = unit.schedule.intensities(f)
             intens.append(it)
             models.append(unit.model.degraded(it))
-            inputs.append(config.mission.sample(rng_for(config.seed, _STREAM_MISSION, unit.unit_id, f)))
-            rngs.append(rng_for(config.seed, _STREAM_NOISE, unit.unit_id, f))
+            inputs.append(config.mission.sample(mission_rng(config.seed, unit.unit_id, f)))
+            rngs.append(noise_rng(config.seed, unit.unit_id, f))
             labels.append(f"unit {unit.unit_id}, flight {f}")
         outs = simulate(models, inputs, rngs, labels=labels)
         batch = [SimulatedFlight(unit.unit_id * config.n_flights + f, unit.unit_id, f, it, inp, out)
