@@ -67,6 +67,10 @@ from fuelhm_bench.taxonomy import EFFECT_IDS
 #: recalibrated model on the held-out flights above which a disagreement is reported as significant.
 SIGNIFICANT_SCORE = 3.0
 
+#: Candidate fits use Broyden updates of the recalibration columns of the Jacobian
+#: (:func:`~fuelhm_bench.calibration.fit.fit_joint`).
+BROYDEN = True
+
 #: Units of the effect parameters (for reports and JSON).
 PARAMETER_UNITS: dict[str, str] = {
     "overlap_m": "m", "stiffness_ratio": "-", "coulomb_n": "N", "static_ratio": "-",
@@ -456,7 +460,7 @@ def _fit_candidate(cand: EffectCandidate, base: JointFit, fit_sets: dict, held_s
     _, values, unit_values, models = best
     shared_start = {p.path: models[next(iter(models))].get(p.path) for p in cand.parameters}
     res = fit_joint(models, fit_sets, parameters, cand.parameters, unit_start=unit_values,
-                    shared_start=shared_start, max_iterations=iterations)
+                    shared_start=shared_start, max_iterations=iterations, broyden=BROYDEN)
     fleet = apply_values(_with_effect(start_model, cand, cand.start_values({})),
                          {**fleet_values(res.unit_values, parameters), **res.shared_values})
     hm = heldout_models(res.unit_models, fleet, held_sets)

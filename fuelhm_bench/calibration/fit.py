@@ -208,6 +208,10 @@ class _Problem:
         self.lo = np.array(lo)
         self.hi = np.maximum(np.array(hi), self.lo + 1e-9)
         self._cache: tuple[bytes, np.ndarray] | None = None
+        self.broyden = False
+        self.refresh_every = 4
+        self._last: tuple | None = None
+        self._since_refresh = 0
 
     def unit_z(self, z: np.ndarray, u: int) -> np.ndarray:
         return z[u * self.n_u:(u + 1) * self.n_u]
@@ -246,13 +250,10 @@ class _Problem:
         self._cache = (key, r)
         return r
 
-    def jac(self, z: np.ndarray) -> np.ndarray:
-        r0 = self.fun(z)
+    def _fd(self, z: np.ndarray, r0: np.ndarray, jac: np.ndarray, groups: list) -> None:
+        """Forward differences for the given column groups (in place)."""
         p = z.shape[0]
-        jac = np.zeros((self.n, p))
-        n_units = len(self.keys)
-        groups = [[u * self.n_u + j for u in range(n_units)] for j in range(self.n_u)]
-        groups += [[n_units * self.n_u + j] for j in range(len(self.shared_params))]
+        n_unit_cols = len(self.keys) * self.n_u
         for cols in groups:
             step = np.zeros(p)
             for c in cols:
@@ -260,11 +261,38 @@ class _Problem:
                 step[c] = h if z[c] + h <= self.hi[c] else -h
             r1 = self.fun(z + step)
             for c in cols:
-                if c < n_units * self.n_u:
+                if c < n_unit_cols:
                     rows = self.rows[c // self.n_u]
                     jac[rows, c] = (r1[rows] - r0[rows]) / step[c]
                 else:
                     jac[:, c] = (r1 - r0) / step[c]
+
+    def jac(self, z: np.ndarray) -> np.ndarray:
+        r0 = self.fun(z)
+        p = z.shape[0]
+        n_units = len(self.keys)
+        unit_groups = [[u * self.n_u + j for u in range(n_units)] for j in range(self.n_u)]
+        shared_groups = [[n_units * self.n_u + j] for j in range(len(self.shared_params))]
+        if self.broyden and self._last is not None and self._since_refresh < self.refresh_every:
+            z_prev, r_prev, jac = self._last
+            jac = jac.copy()
+            dz = z - z_prev
+            dr = r0 - r_prev
+            for u in range(n_units):
+                rows = self.rows[u]
+                cu = slice(u * self.n_u, (u + 1) * self.n_u)
+                du = dz[cu]
+                nrm = float(du @ du)
+                if nrm > 0.0:
+                    predicted = jac[rows, cu] @ du + jac[rows, n_units * self.n_u:] @ dz[n_units * self.n_u:]
+                    jac[rows, cu] += np.outer(dr[rows] - predicted, du / nrm)
+            self._fd(z, r0, jac, shared_groups)
+            self._since_refresh += 1
+        else:
+            jac = np.zeros((self.n, p))
+            self._fd(z, r0, jac, unit_groups + shared_groups)
+            self._since_refresh = 0
+        self._last = (z.copy(), r0.copy(), jac)
         self.fun(z)  # leave the cache at z
         return jac
 
@@ -273,7 +301,7 @@ def fit_joint(models: Mapping[Hashable, object], sets: Mapping[Hashable, rp.Repl
               unit_parameters: Sequence[FitParameter], shared_parameters: Sequence[FitParameter] = (), *,
               unit_start: Mapping[Hashable, Mapping[str, float]] | None = None,
               shared_start: Mapping[str, float] | None = None, max_iterations: int = 25, diff_step: float = 0.05,
-              progress: Callable[[int], None] | None = None) -> JointFit:
+              broyden: bool = False, progress: Callable[[int], None] | None = None) -> JointFit:
     """Fit per-unit and shared parameters to the replayed velocities (bounded least squares).
 
     Parameters
@@ -295,6 +323,11 @@ def fit_joint(models: Mapping[Hashable, object], sets: Mapping[Hashable, rp.Repl
         Trust-region iterations (each costs one replay plus one grouped Jacobian).
     diff_step : float, default=0.05
         Forward-difference step [normalised units].
+    broyden : bool, default=False
+        Cheaper Jacobians: the unit-parameter columns are recomputed by finite differences
+        every fourth Jacobian only, and updated in between by Broyden's rank-one rule (unit by
+        unit) along the steps taken; the shared columns are always recomputed. A Jacobian
+        then costs ``p_shared`` replays instead of ``p_unit + p_shared``.
     progress : callable, optional
         Called with 1 after every replay of all units.
 
@@ -321,6 +354,7 @@ def fit_joint(models: Mapping[Hashable, object], sets: Mapping[Hashable, rp.Repl
     s_start = {p.path: p.clip(float(first.get(p.path) if shared_start is None or p.path not in shared_start
                                      else shared_start[p.path])) for p in shared_params}
     prob = _Problem(models, sets, unit_params, shared_params, u_start, s_start, diff_step, progress)
+    prob.broyden = bool(broyden)
     z0 = np.clip(np.zeros(prob.lo.shape[0]), prob.lo + 1e-9 * (prob.hi - prob.lo), prob.hi - 1e-9 * (prob.hi - prob.lo))
     r0 = prob.fun(z0)
     if np.all(r0 == 1e3):

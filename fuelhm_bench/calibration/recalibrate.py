@@ -173,8 +173,8 @@ class CalibrationResult:
         RMS sample residual [mm/s] (start model, per-unit models).
     evaluation : ReplaySet
         The evaluated samples (for curves and plots).
-    v_before, v_after : numpy.ndarray
-        Replayed velocities of the start and per-unit models on ``evaluation`` [mm/s].
+    v_before, v_after, v_fleet : numpy.ndarray
+        Replayed velocities of the start, per-unit and fleet models on ``evaluation`` [mm/s].
     fit : JointFit
         The underlying fit.
     frame_s : float
@@ -198,6 +198,7 @@ class CalibrationResult:
     evaluation: rp.ReplaySet
     v_before: np.ndarray
     v_after: np.ndarray
+    v_fleet: np.ndarray
     fit: JointFit
     frame_s: float
     n2_measured: bool
@@ -342,7 +343,7 @@ def recalibrate(flights, model=None, *, parameters: Sequence[FitParameter] = REC
     fleet = apply_values(start, fleet_values(result.unit_values, parameters))
     g_before, rms_before, v_before = evaluate({k: start for k in eval_sets}, eval_sets, config.curve)
     g_after, rms_after, v_after = evaluate(result.unit_models, eval_sets, config.curve)
-    g_fleet, _, _ = evaluate({k: fleet for k in eval_sets}, eval_sets, config.curve)
+    g_fleet, _, v_fleet = evaluate({k: fleet for k in eval_sets}, eval_sets, config.curve)
     idf = unit_identifiability(result, fit_sets)
     estimates = []
     for j, p in enumerate(parameters):
@@ -358,6 +359,7 @@ def recalibrate(flights, model=None, *, parameters: Sequence[FitParameter] = REC
         identifiability=idf, gap_before=g_before, gap_after=g_after, gap_fleet=g_fleet, rms_before=rms_before,
         rms_after=rms_after, evaluation=merge_sets([eval_sets[k] for k in keys]),
         v_before=np.concatenate([v_before[k] for k in keys]), v_after=np.concatenate([v_after[k] for k in keys]),
+        v_fleet=np.concatenate([v_fleet[k] for k in keys]),
         fit=result, frame_s=frame_s, n2_measured=all(s.n2_measured for s in eval_sets.values()),
         curve=config.curve)
 

@@ -37,7 +37,8 @@ Sample selection
 Flights are cut into *runs* of uniform sampling (an interval longer than
 ``gap_factor`` frames, or shorter than ``1 - frame_tolerance`` frames, splits a flight).
 A sample is *valid* if its differentiator window is complete, N2 is finite, the rod is
-not within ``end_stop_margin_mm`` of an end stop of the model's stroke, and it is not a
+not within ``end_stop_margin_mm`` of an end stop of the model's stroke (nor within
+``end_stop_dilate_s`` of such a sample), and it is not a
 *stall* (current within ``current_limit_margin_ma`` of the flight's current extreme while
 the rod does not move faster than ``stall_velocity_mm_s``: integrator wind-up against a stop).
 A valid sample is *moving* if ``|v| >= moving_velocity_mm_s`` or its current changes
@@ -76,6 +77,9 @@ class ReplayConfig:
         N2 used when a flight has no ``n2_pct`` column [%] (cruise; sets the supply pressure).
     end_stop_margin_mm : float, default=0.5
         Samples whose window comes within this distance of ``0`` or the model's stroke are masked [mm].
+    end_stop_dilate_s : float, default=0.3
+        The end-stop mask is extended by this time on both sides [s] (the rod touches the stop
+        before a lagging sensor shows it, and leaves it after).
     current_limit_margin_ma : float, default=0.05
         Margin around a flight's current extremes for the stall mask [mA].
     stall_velocity_mm_s : float, default=1.0
@@ -103,6 +107,7 @@ class ReplayConfig:
     half_width: int = 2
     n2_default_pct: float = 85.0
     end_stop_margin_mm: float = 0.5
+    end_stop_dilate_s: float = 0.3
     current_limit_margin_ma: float = 0.05
     stall_velocity_mm_s: float = 1.0
     gap_factor: float = 1.5
@@ -118,7 +123,7 @@ class ReplayConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.half_width, int) or isinstance(self.half_width, bool) or not 1 <= self.half_width <= 20:
             raise range_error("ReplayConfig.half_width", "an integer in [1, 20]", self.half_width)
-        for name, lo, hi in (("n2_default_pct", 30.0, 110.0), ("end_stop_margin_mm", 0.0, 10.0),
+        for name, lo, hi in (("n2_default_pct", 30.0, 110.0), ("end_stop_margin_mm", 0.0, 10.0), ("end_stop_dilate_s", 0.0, 10.0),
                              ("current_limit_margin_ma", 0.0, 5.0), ("stall_velocity_mm_s", 0.0, 50.0),
                              ("gap_factor", 1.01, 100.0), ("frame_tolerance", 0.0, 0.5),
                              ("direction_rate_ma_s", 0.0, 1e4), ("moving_velocity_mm_s", 0.0, 100.0),
@@ -272,6 +277,9 @@ def _run_samples(flight, a: int, b: int, frame_s: float, stroke_mm: float, cfg: 
     pad = np.pad(pos, h, mode="edge")
     win = np.lib.stride_tricks.sliding_window_view(pad, 2 * h + 1)
     near_stop = (win.min(axis=1) <= cfg.end_stop_margin_mm) | (win.max(axis=1) >= stroke_mm - cfg.end_stop_margin_mm)
+    k = int(math.ceil(cfg.end_stop_dilate_s / frame_s))
+    if k > 0 and near_stop.any():  # the rod may touch the stop before the (lagged) measurement shows it
+        near_stop = np.convolve(near_stop.astype(float), np.ones(2 * k + 1), mode="same") > 0.5
     at_limit = (cur >= i_hi - cfg.current_limit_margin_ma) | (cur <= i_lo + cfg.current_limit_margin_ma)
     stall = at_limit & (np.abs(np.nan_to_num(v)) < cfg.stall_velocity_mm_s)
     n2 = n2_pct[a:b]

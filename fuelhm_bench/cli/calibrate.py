@@ -50,9 +50,12 @@ def run(args: argparse.Namespace) -> int:
               f"(fleet model), {result.gap_after:.3f} mm/s per unit")
     save_model(result.model, out, overwrite=args.force, header=header)
     if plot is not None:
-        plot_curves(result.evaluation, {"before (start model)": result.v_before, "after (recalibrated)": result.v_after},
-                    plot, curve=result.curve,
-                    title=f"velocity gain: gap {result.gap_before:.3f} -> {result.gap_after:.3f} mm/s")
+        curves = {"before (start model)": result.v_before, "after (recalibrated per unit)": result.v_after}
+        if len(result.unit_models) > 1:
+            curves["after (fleet model written)"] = result.v_fleet
+        plot_curves(result.evaluation, curves, plot, curve=result.curve,
+                    title=f"velocity gain: gap {result.gap_before:.3f} -> {result.gap_after:.3f} mm/s per unit, "
+                          f"{result.gap_fleet:.3f} mm/s fleet model")
     print(calibration_summary(result))
     print(f"wrote {out}" + (f" and {plot}" if plot is not None else ""))
     return 0

@@ -1,0 +1,200 @@
+"""The model-discrepancy workflow on data with a hidden effect (issue 6)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fuelhm_bench.calibration.discrepancy import (
+    CandidateOutcome,
+    DiscrepancyConfig,
+    decide,
+    find_discrepancy,
+    split_fit_holdout,
+)
+from fuelhm_bench.calibration.recalibrate import CalibrationConfig
+from fuelhm_bench.calibration.synthetic import TEST_RANGES, draw_magnitude, hidden_effect_flights
+from fuelhm_bench.cli import main
+from fuelhm_bench.errors import DataFormatError, UnknownNameError
+from fuelhm_bench.io import FlightArrays, split_flights, write_flights
+from fuelhm_bench.physics.model import load_model
+from fuelhm_bench.taxonomy import EFFECT_IDS
+
+#: Small instances, kept in one place: 2 units x 2 flights of 4 min, fit frames capped.
+SMALL = DiscrepancyConfig(calibration=CalibrationConfig(fit_max_frames=16000), heldout_max_frames=60000, n_jobs=2)
+#: Seed of each hidden-effect data set (the magnitude is drawn from it in TEST_RANGES).
+SEEDS = {"spool_overlap": 21, "spool_flow_force": 22, "rod_friction": 23, "lvdt_lag": 24, "load_stiffness": 25,
+         "none": 26}
+
+
+def _data(effect, **kw):
+    frame, case = hidden_effect_flights(effect, n_units=2, n_flights=2, minutes=4.0, seed=SEEDS[effect or "none"],
+                                        **kw)
+    flights, rejected = split_flights(frame)
+    assert not rejected
+    return frame, flights, case
+
+
+@pytest.mark.parametrize("effect", EFFECT_IDS)
+def test_names_the_hidden_effect_and_shrinks_the_heldout_gap(effect):
+    _, flights, case = _data(effect)
+    result = find_discrepancy(flights, config=SMALL)
+    assert result.effect == effect, [(c.effect, round(c.delta_bic), round(c.gap_reduction, 2)) for c in result.ranking]
+    assert result.gap_after <= 0.5 * result.gap_before
+    assert result.gap_after < result.gap_recalibrated
+    main_param = TEST_RANGES[effect][0]
+    truth, fitted = case.parameters[main_param], result.parameters[main_param]
+    assert abs(fitted - truth) <= 0.35 * abs(truth), (fitted, truth)
+    # The augmented model carries the effect with the fitted values; the ranking is by BIC.
+    assert result.model.effect(effect) is not None
+    bics = [c.bic for c in result.ranking]
+    assert bics == sorted(bics)
+    assert result.ranking[0].effect == effect and result.ranking[0].eligible
+    assert set(c.effect for c in result.ranking) == set(EFFECT_IDS) | {"none"}
+
+
+def test_answers_none_without_a_hidden_effect():
+    _, flights, _ = _data(None)
+    result = find_discrepancy(flights, config=SMALL)
+    assert result.effect == "none"
+    assert result.parameters == {}
+    assert result.model.effects == ()
+    assert result.gap_after == result.gap_recalibrated < 0.5 * result.gap_before
+    assert not any(c.eligible for c in result.ranking)
+    assert result.region.startswith("no significant disagreement")
+
+
+def test_other_sample_rate_noise_and_flight_length():
+    frame, case = hidden_effect_flights("lvdt_lag", parameters={"time_constant_s": 0.04}, n_units=1, n_flights=3,
+                                        minutes=6.0, frame_s=0.02, noise_std_m=8e-6, seed=31)
+    flights, _ = split_flights(frame)
+    assert np.median(np.diff(flights[0].time_s)) == pytest.approx(0.02)
+    result = find_discrepancy(flights, config=SMALL)
+    assert result.frame_s == pytest.approx(0.02)
+    assert result.model.controller.frame_s == pytest.approx(0.02)
+    assert result.effect == "lvdt_lag"
+    assert result.parameters["time_constant_s"] == pytest.approx(0.04, rel=0.3)
+    assert result.gap_after <= 0.5 * result.gap_before
+
+
+def test_split_is_seeded_stratified_and_complete():
+    flights = [FlightArrays(i, f"U{i % 3}", np.arange(3.0), np.arange(3.0), np.arange(3.0)) for i in range(10)]
+    fit, held = split_fit_holdout(flights, 0.3, seed=4)
+    assert len(held) == 3 and len(fit) == 7
+    assert {f.flight_id for f in fit} | {f.flight_id for f in held} == set(range(10))
+    assert {f.unit_id for f in fit} == {"U0", "U1", "U2"}  # every unit keeps fit flights
+    again = split_fit_holdout(flights, 0.3, seed=4)
+    assert [f.flight_id for f in again[1]] == [f.flight_id for f in held]
+    two = split_fit_holdout(flights[:2], 0.3, seed=0)
+    assert len(two[0]) == 1 and len(two[1]) == 1
+    with pytest.raises(DataFormatError, match="Too few flights to hold out"):
+        split_fit_holdout(flights[:1])
+
+
+def _outcome(effect, delta_bic, reduction, bic=None):
+    return CandidateOutcome(effect, {}, -delta_bic if bic is None else bic, delta_bic, 1.0, 1.0, reduction, False,
+                            1, 0.0, {})
+
+
+def test_decision_rule():
+    none = _outcome("none", 0.0, 0.0)
+    rule = {"bic_threshold": 10.0, "min_gap_reduction": 0.3}
+    assert decide([none, _outcome("lvdt_lag", 500.0, 0.8)], **rule) == "lvdt_lag"
+    # Large BIC gain without a held-out gain: none.
+    assert decide([none, _outcome("lvdt_lag", 500.0, 0.1)], **rule) == "none"
+    # Held-out gain without enough BIC gain: none.
+    assert decide([none, _outcome("lvdt_lag", 5.0, 0.9)], **rule) == "none"
+    # Two eligible candidates: the lower BIC wins, even with a smaller held-out gain.
+    assert decide([none, _outcome("rod_friction", 300.0, 0.9), _outcome("spool_overlap", 900.0, 0.5)],
+                  **rule) == "spool_overlap"
+
+
+def test_too_few_flights_and_no_transient_are_refused():
+    _, flights, _ = _data(None)
+    with pytest.raises(DataFormatError, match="Too few flights to hold out: got 1"):
+        find_discrepancy(flights[:1], config=SMALL)
+    t = np.arange(18000) * 0.01
+    rng = np.random.default_rng(1)
+    still = [FlightArrays(k, "U", t, 0.3 + 0.003 * rng.standard_normal(t.size),
+                          30.0 + 0.017 * np.round(rng.standard_normal(t.size)),
+                          extras={"n2_pct": np.full(t.size, 80.0)}) for k in range(3)]
+    with pytest.raises(DataFormatError, match="Not enough excitation.*moving samples.*test sweep"):
+        find_discrepancy(still, config=SMALL)
+
+
+def test_unknown_candidate_is_refused():
+    _, flights, _ = _data(None)
+    with pytest.raises(UnknownNameError, match="Unknown candidate effect 'stiction'"):
+        find_discrepancy(flights, config=DiscrepancyConfig(candidates=("stiction",)))
+
+
+def test_draw_magnitude_is_seeded_and_in_range():
+    for effect, (name, lo, hi) in TEST_RANGES.items():
+        a = draw_magnitude(effect, np.random.default_rng(3))[name]
+        assert a == draw_magnitude(effect, np.random.default_rng(3))[name]
+        assert lo <= abs(a) <= hi
+
+
+@pytest.fixture(scope="module")
+def overlap_file(tmp_path_factory):
+    frame, _, case = _data("spool_overlap")
+    path = write_flights(frame, tmp_path_factory.mktemp("disc") / "measured.parquet")
+    return path, case
+
+
+def test_cli_json_prints_one_object_and_out_writes_the_report(overlap_file, tmp_path, capsys):
+    path, case = overlap_file
+    out = tmp_path / "report"
+    code = main(["discrepancy", str(path), "--json", "--out", str(out), "--seed", "2",
+                 "--candidates", "spool_overlap,lvdt_lag,spool_flow_force"])
+    captured = capsys.readouterr()
+    assert code == 0
+    payload = json.loads(captured.out)  # exactly one JSON object, nothing else on stdout
+    assert isinstance(payload, dict)
+    for key in ("effect", "parameters", "region", "gap_metric", "gap_before", "gap_after", "ranking"):
+        assert key in payload
+    assert payload["effect"] == "spool_overlap"
+    assert payload["parameters"]["overlap_m"]["unit"] == "m"
+    assert payload["gap_after"] <= 0.5 * payload["gap_before"]
+    assert {r["effect"] for r in payload["ranking"]} == {"spool_overlap", "lvdt_lag", "spool_flow_force", "none"}
+    assert all({"effect", "bic", "gap_after"} <= set(r) for r in payload["ranking"])
+    assert "split:" in captured.err  # logs go to stderr
+    for name in ("report.md", "augmented_model.yaml", "result.json", "curves.png", "residual_map.png", "regions.png"):
+        assert (out / name).stat().st_size > 0
+    model = load_model(out / "augmented_model.yaml")
+    assert model.effect("spool_overlap").overlap_m == pytest.approx(payload["parameters"]["overlap_m"]["value"])
+    report = (out / "report.md").read_text()
+    assert "Missing effect: `spool_overlap`" in report and "![curves](curves.png)" in report
+    # The augmented model simulates.
+    sim = tmp_path / "sim.parquet"
+    assert main(["simulate", "--model", str(out / "augmented_model.yaml"), "--units", "1", "--flights", "1",
+                 "--minutes", "2", "--out", str(sim)]) == 0
+    assert len(pd.read_parquet(sim)) == 12000
+    # The report directory is not overwritten without --force.
+    assert main(["discrepancy", str(path), "--out", str(out), "--candidates", "lvdt_lag"]) == 2
+    assert "refusing to overwrite" in capsys.readouterr().err
+
+
+def test_cli_bad_inputs_give_clear_messages(overlap_file, tmp_path, capsys):
+    path, _ = overlap_file
+    broken = tmp_path / "model.yaml"
+    broken.write_text("cylinder:\n  bore_m: -1\n")
+    assert main(["discrepancy", str(path), "--model", str(broken), "--json"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "model.yaml" in captured.err and "bore_m" in captured.err
+    assert main(["discrepancy", str(tmp_path / "nothing.parquet")]) == 2
+    assert "nothing.parquet" in capsys.readouterr().err
+    frame = pd.read_parquet(path).drop(columns=["current_mA"])
+    bad = tmp_path / "bad.csv"
+    frame.to_csv(bad, index=False)
+    assert main(["discrepancy", str(bad)]) == 2
+    assert "missing the required column(s) ['current_mA']" in capsys.readouterr().err
+    one = tmp_path / "one.parquet"
+    full = pd.read_parquet(path)
+    write_flights(full[full["flight_id"] == full["flight_id"].iloc[0]], one)
+    assert main(["discrepancy", str(one)]) == 2
+    assert "Too few flights to hold out" in capsys.readouterr().err
