@@ -21,6 +21,7 @@ Protocol (also in docs/methods.md):
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import multiprocessing
 import time
@@ -256,13 +257,13 @@ def scenario_data(scenario, *, seed: int | None = None, doe_units: int = 6, scal
 
     sc = load_scenario(scenario) if not hasattr(scenario, "test_fleet_config") else scenario
     if seed is not None:  # a new master seed: both fleets re-derived from it
-        sc = dataclasses_replace(sc, seeds=dataclasses_replace(sc.seeds, master=int(seed), training=None, test=None))
+        sc = dataclasses.replace(sc, seeds=dataclasses.replace(sc.seeds, master=int(seed), training=None, test=None))
     train_cfg = sc.training_fleet_config()
     test_cfg = sc.test_fleet_config()
     if not drifted:
-        test_cfg = dataclasses_replace(test_cfg, nominal=sc.truth_model())
+        test_cfg = dataclasses.replace(test_cfg, nominal=sc.truth_model())
     if scale != 1.0:
-        test_cfg = dataclasses_replace(test_cfg, n_units=max(1, int(round(test_cfg.n_units * scale))))
+        test_cfg = dataclasses.replace(test_cfg, n_units=max(1, int(round(test_cfg.n_units * scale))))
     # The published knowledge (healthy spread for the signatures, ITL) comes from the benchmark's own
     # simulations of the published model, whatever the amount of data the methods are given.
     build = KnowledgeBuild.from_scenario(sc, doe_units=doe_units, seed=train_cfg.seed)
@@ -277,17 +278,10 @@ def scenario_data(scenario, *, seed: int | None = None, doe_units: int = 6, scal
     cal_part = train[cal_mask].reset_index(drop=True) if n_cal else train.reset_index(drop=True)
     nominal = None
     if drifted and sc.drift:
-        nom_cfg = dataclasses_replace(test_cfg, nominal=sc.truth_model())
+        nom_cfg = dataclasses.replace(test_cfg, nominal=sc.truth_model())
         nom_ind, nom_lab = fleet_indicators(nom_cfg, progress=progress)
         nominal = EvaluationData(fit_part, cal_part, nom_ind, nom_lab, knowledge.as_method_knowledge(),
                                  name=f"{sc.name} (no drift)")
     data = EvaluationData(fit_part, cal_part, test_ind, test_lab, knowledge.as_method_knowledge(), name=sc.name,
                           nominal=nominal)
     return data, knowledge
-
-
-def dataclasses_replace(obj, **changes):
-    """``dataclasses.replace`` (kept local to avoid a module-level import cycle in type checkers)."""
-    import dataclasses
-
-    return dataclasses.replace(obj, **changes)
