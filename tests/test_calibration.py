@@ -158,3 +158,25 @@ def test_calibrate_command_reports_bad_inputs(tmp_path, capsys):
     unknown.write_text("servovalve:\n  null_bias: 0.0005\n")
     assert main(["calibrate", str(good), "--model", str(unknown), "--out", str(tmp_path / "m.yaml")]) == 2
     assert "unknown parameter 'servovalve.null_bias'" in capsys.readouterr().err
+
+
+def test_replay_splits_flights_at_time_gaps():
+    model = LoopModel().with_parameters({"lvdt.noise_std_m": 0.0, "lvdt.adc_bits": 0})
+    frame, _ = _flights(model, n_flights=1, minutes=2.0)
+    keep = ~frame["time_s"].between(70.0, 75.0)  # a 5 s hole in the recording
+    flights, _ = split_flights(frame[keep])
+    rs = rp.prepare_replay(flights)
+    residual = rp.residuals(model, rs)
+    assert np.sqrt(np.mean(residual ** 2)) < 0.05  # no segment integrates across the hole
+    with pytest.raises(DataFormatError, match="sampled every"):  # two sample rates in one replay
+        slow = FlightArrays(9, None, np.arange(100) * 0.02, np.zeros(100) + np.arange(100) % 2, np.zeros(100))
+        rp.prepare_replay(flights + [slow])
+
+
+def test_recalibration_without_n2_uses_the_documented_constant():
+    frame, _ = hidden_effect_flights(None, n_units=1, n_flights=2, minutes=3.0, seed=8)
+    flights, _ = split_flights(frame.drop(columns=["n2_pct"]))
+    result = recalibrate(flights, config=CalibrationConfig(fit_max_frames=16000))
+    assert not result.n2_measured
+    assert np.allclose(result.evaluation.n2_frac, rp.ReplayConfig().n2_default_pct / 100.0)
+    assert result.gap_after < 0.5 * result.gap_before

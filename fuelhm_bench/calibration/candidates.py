@@ -63,7 +63,8 @@ class EffectCandidate:
         return {**self.fixed, **point}
 
 
-def _p(effect: str, name: str, unit: str, typical: float, lower: float, upper: float, log: bool = False) -> FitParameter:
+def _p(effect: str, name: str, unit: str, typical: float, lower: float, upper: float,
+       log: bool = False) -> FitParameter:
     return FitParameter(f"effect.{effect}.{name}", unit, typical, lower=lower, upper=upper, log=log)
 
 

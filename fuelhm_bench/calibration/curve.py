@@ -51,7 +51,8 @@ class CurveConfig:
             raise range_error("CurveConfig.bin_width_ma", "in [0.005, 5] mA", self.bin_width_ma)
         lo, hi = self.current_range_ma
         if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-            raise range_error("CurveConfig.current_range_ma", "a (low, high) pair with low < high", self.current_range_ma)
+            raise range_error("CurveConfig.current_range_ma", "a (low, high) pair with low < high",
+                              self.current_range_ma)
         if not isinstance(self.min_count, int) or isinstance(self.min_count, bool) or self.min_count < 1:
             raise range_error("CurveConfig.min_count", "an integer >= 1", self.min_count)
 

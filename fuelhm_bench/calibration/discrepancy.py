@@ -46,7 +46,7 @@ import numpy as np
 from fuelhm_bench.calibration import replay as rp
 from fuelhm_bench.calibration.candidates import EffectCandidate, get_candidates
 from fuelhm_bench.calibration.curve import CurveConfig, gap, gap_metric_text, gap_noise_floor
-from fuelhm_bench.calibration.fit import FitParameter, JointFit, apply_values, fit_joint
+from fuelhm_bench.calibration.fit import JointFit, apply_values, fit_joint
 from fuelhm_bench.calibration.recalibrate import (
     NO_UNIT,
     RECALIBRATION_PARAMETERS,
@@ -58,7 +58,7 @@ from fuelhm_bench.calibration.recalibrate import (
     prepare_units,
     unit_key,
 )
-from fuelhm_bench.calibration.regions import RegionMap, region_map, sample_levels
+from fuelhm_bench.calibration.regions import region_map, sample_levels
 from fuelhm_bench.errors import DataFormatError, range_error
 from fuelhm_bench.physics.effects import effect_parameters
 from fuelhm_bench.taxonomy import EFFECT_IDS
@@ -663,10 +663,5 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         seconds=time.perf_counter() - t_start, curve=cal.curve)
 
 
-def fitted_parameters_table(result: DiscrepancyResult) -> list[tuple[str, float, str]]:
-    """(name, value, unit) rows of the named effect's parameters."""
-    return [(k, v, PARAMETER_UNITS.get(k, "")) for k, v in result.parameters.items()]
-
-
-__all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "FitParameter", "NoiseModel", "decide",
+__all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "NoiseModel", "decide",
            "find_discrepancy", "noise_model", "split_fit_holdout"]

@@ -16,18 +16,24 @@ parameter                               feature of the curve it moves
 ``servovalve.transition_end``           end of the change to the outer gain
 ``cylinder.diaphragm_diameter_m``       idle current offset ``I0 - Inb`` (cooling flow)
 ``load.aero_force_at_100pct_n``         extension / retraction asymmetry growing with N2^2
+``servovalve.rated_current_a``          where the velocity saturates (full spool stroke)
 ======================================  ===================================================
 
-Parameters left out are either exact or near-exact aliases of these, or invisible in the
-data (numbers from the Jacobian of the replay residuals on simulated healthy flights,
-``docs/calibration.md``): ``discharge_coefficient`` and ``supply_rise_at_100pct_pa`` scale
-the flows exactly like the slot widths (correlation 1.00); ``driver.offset_a`` is the null
-bias; ``rated_current_a`` and ``driver.gain`` scale the current axis (correlation 0.98 with
-the null bias, 1.00 with each other); ``radial_clearance_m`` moves the residuals by 0.006 mm/s
-per 5 % (its dispersion) and ``spool_time_constant_s`` by 0.01 mm/s per 5 %: not
-identifiable at a 10 ms frame (and the time constant would compete with ``lvdt_lag``).
-:class:`CalibrationResult` reports the condition number and the correlations of the
-fitted subset on the data at hand (:class:`~fuelhm_bench.calibration.fit.Identifiability`).
+Parameters left out are aliases of these, or invisible in the data. Numbers from the
+Jacobian of the replay residuals on three simulated 4-minute healthy flights, one typical
+change (the manufacturing dispersion) per parameter; "correlation" is the largest
+correlation of the estimate with the subset's once the parameter is added to it
+(``docs/calibration.md``): ``discharge_coefficient`` (-1.00 with the outer slot width:
+flows scale with ``Cd w``), ``supply_rise_at_100pct_pa`` (-1.00: ``w sqrt(dP)``),
+``spool_stroke_m`` (-1.00), ``driver.offset_a`` (+1.00 with the null bias: only
+``(Inb - offset) / gain`` is seen), ``driver.gain`` (+1.00 with the rated current: only
+``gain / I_r`` is seen); ``radial_clearance_m`` (0.005 mm/s RMS per 5 %),
+``spool_time_constant_s`` (0.011 mm/s per 5 %: invisible at a 10 ms frame, and it would
+compete with ``lvdt_lag``), ``spool_friction_n`` (0.035 mm/s per 10 %). The subset itself
+has a condition number of about 17-19 (unit-norm columns) and its largest correlation is
+-0.91 (the two ends of the transition, which share one short stretch of the curve).
+:class:`CalibrationResult` reports the condition number and the correlations of the fitted
+subset on the data at hand (:class:`~fuelhm_bench.calibration.fit.Identifiability`).
 
 Per unit and fleet
 ------------------
@@ -49,8 +55,7 @@ import numpy as np
 
 from fuelhm_bench.calibration import replay as rp
 from fuelhm_bench.calibration.curve import CurveConfig, gap
-from fuelhm_bench.calibration.fit import FitParameter, Identifiability, JointFit, apply_values, fit_joint, \
-    identifiability
+from fuelhm_bench.calibration.fit import FitParameter, JointFit, apply_values, fit_joint, identifiability
 from fuelhm_bench.errors import DataFormatError, range_error
 
 #: The recalibration subset (see the module docstring). ``typical`` is the manufacturing
@@ -76,13 +81,14 @@ RECALIBRATION_PARAMETERS: tuple[FitParameter, ...] = (
 
 #: Parameters considered and left out, with the reason (reported by the docs and the CLI).
 EXCLUDED_PARAMETERS: dict[str, str] = {
-    "servovalve.discharge_coefficient": "scales every metering flow exactly like the slot widths (correlation 1.00)",
-    "fluid.supply_rise_at_100pct_pa": "velocity ~ w sqrt(dP_s): aliased with the slot widths",
-    "driver.offset_a": "identical to the null bias for the recorded (commanded) current",
-    "servovalve.rated_current_a": "scales the current axis: correlation 0.98 with the null bias, 1.00 with driver.gain",
-    "driver.gain": "scales the current axis like the rated current (correlation 1.00)",
-    "servovalve.radial_clearance_m": "0.006 mm/s RMS change per 5 % (its dispersion): not identifiable",
-    "servovalve.spool_time_constant_s": "0.01 mm/s RMS change per 5 %: invisible at a 10 ms frame; aliases lvdt_lag",
+    "servovalve.discharge_coefficient": "flows scale with Cd w: correlation -1.00 with the outer slot width",
+    "fluid.supply_rise_at_100pct_pa": "velocity ~ w sqrt(dP_s): correlation -1.00 with the outer slot width",
+    "servovalve.spool_stroke_m": "scales the metering area like the slot widths: correlation -1.00",
+    "driver.offset_a": "only (Inb - offset) / gain is seen: correlation +1.00 with the null bias",
+    "driver.gain": "only gain / I_r is seen: correlation +1.00 with the rated current",
+    "servovalve.radial_clearance_m": "0.005 mm/s RMS change per 5 % (its dispersion): not identifiable",
+    "servovalve.spool_time_constant_s": "0.011 mm/s RMS change per 5 %: invisible at a 10 ms frame, aliases lvdt_lag",
+    "servovalve.spool_friction_n": "0.035 mm/s RMS change per 10 % (its dispersion)",
 }
 
 #: Key of the flights that carry no ``unit_id``.

@@ -43,11 +43,12 @@ not within ``end_stop_margin_mm`` of an end stop of the model's stroke (nor with
 the rod does not move faster than ``stall_velocity_mm_s``: integrator wind-up against a stop).
 A valid sample is *moving* if ``|v| >= moving_velocity_mm_s`` or its current changes
 faster than ``direction_rate_ma_s``; otherwise it is *idle*. Replayed segments are the
-moving runs (merged when closer than two warm-ups, padded by a warm-up on each side)
-cut into blocks of at most ``max_segment_s``, plus idle blocks of ``idle_block_s`` (padded likewise) making at most ``idle_share`` of the
-scored samples: an actuator is idle most of a flight, and idle samples repeat one point
-of the curve. ``max_frames`` caps the replayed frames (segments drawn at random, seeded),
-which bounds the cost of one model evaluation during the fits.
+moving runs (merged when closer than two warm-ups, padded by a warm-up on each side) cut
+into blocks of at most ``max_segment_s``, plus idle blocks of ``idle_block_s`` (padded
+likewise) making at most ``idle_share`` of the scored samples: an actuator is idle most of
+a flight, and idle samples repeat one point of the curve. ``max_frames`` caps the replayed
+frames, which bounds the cost of one model evaluation during the fits: moving segments are
+then drawn (seeded) so as to cover the curve evenly (see ``_select``).
 """
 
 from __future__ import annotations
@@ -123,7 +124,8 @@ class ReplayConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.half_width, int) or isinstance(self.half_width, bool) or not 1 <= self.half_width <= 20:
             raise range_error("ReplayConfig.half_width", "an integer in [1, 20]", self.half_width)
-        for name, lo, hi in (("n2_default_pct", 30.0, 110.0), ("end_stop_margin_mm", 0.0, 10.0), ("end_stop_dilate_s", 0.0, 10.0),
+        for name, lo, hi in (("n2_default_pct", 30.0, 110.0), ("end_stop_margin_mm", 0.0, 10.0),
+                             ("end_stop_dilate_s", 0.0, 10.0),
                              ("current_limit_margin_ma", 0.0, 5.0), ("stall_velocity_mm_s", 0.0, 50.0),
                              ("gap_factor", 1.01, 100.0), ("frame_tolerance", 0.0, 0.5),
                              ("direction_rate_ma_s", 0.0, 1e4), ("moving_velocity_mm_s", 0.0, 100.0),
@@ -207,22 +209,6 @@ class ReplaySet:
     def n_scored(self) -> int:
         """Number of scored samples."""
         return int(np.count_nonzero(self.scored))
-
-    def subset(self, flights: np.ndarray) -> ReplaySet:
-        """The segments of some flights only (``flights``: indices into ``flight_ids``)."""
-        keep_seg = np.isin(self.flight[self.starts], np.asarray(flights))
-        idx = np.concatenate([np.arange(s, s + n) for s, n in zip(self.starts[keep_seg], self.lengths[keep_seg])]
-                             or [np.zeros(0, dtype=np.int64)])
-        lengths = self.lengths[keep_seg]
-        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64) if lengths.size else lengths
-
-        def take(a):
-            return None if a is None else a[idx]
-
-        return ReplaySet(self.frame_s, take(self.current_a), take(self.position_m), take(self.n2_frac), starts,
-                         lengths, take(self.scored), take(self.v_meas_mm_s), take(self.i_ma), take(self.direction),
-                         take(self.moving), take(self.position_mm), take(self.flight), take(self.phase),
-                         self.flight_ids, self.unit_ids, self.n2_measured, self.config)
 
 
 # --------------------------------------------------------------------------- frames

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from fuelhm_bench.calibration.curve import DIRECTION_NAMES, CurveConfig, cell_residuals, pooled_curve
+from fuelhm_bench.calibration.recalibrate import RECALIBRATION_PARAMETERS
 from fuelhm_bench.errors import OutputPathError
 
 
@@ -160,7 +161,7 @@ def calibration_summary(result) -> str:
 
 
 def write_discrepancy_report(result, out_dir: str | Path, *, model_file: str, data_name: str = "") -> Path:
-    """Write ``report.md`` with its figures and ``result.json`` in ``out_dir`` (the model file is written by the caller).
+    """Write ``report.md``, its figures and ``result.json`` in ``out_dir`` (the caller writes the model file).
 
     Returns
     -------
@@ -202,19 +203,22 @@ def _discrepancy_markdown(result, model_file: str, data_name: str) -> str:
               f"**Where the recalibrated model disagrees (held-out flights):** {r.region}", "",
               "| held-out gap | mm/s |", "|---|---|",
               f"| input model | {_fmt(r.gap_before)} |", f"| recalibrated | {_fmt(r.gap_recalibrated)} |",
-              f"| recalibrated + `{r.effect}` | {_fmt(r.gap_after)} |", f"| noise floor | {_fmt(r.gap_floor)} |", "",
+              f"| recalibrated + `{r.effect}` | {_fmt(r.gap_after)} |",
+              f"| noise floor | {_fmt(r.gap_floor)} |", "",
               f"Gap reduction on held-out flights: {100 * r.gap_reduction:.1f} % (input model to final model).", "",
               f"Gap metric: {r.gap_metric}.", "",
               "## Data", "",
               f"- fit flights ({len(r.fit_flights)}): {', '.join(map(str, r.fit_flights))}",
               f"- held-out flights ({len(r.heldout_flights)}): {', '.join(map(str, r.heldout_flights))}",
-              f"- sample period {1e3 * r.frame_s:g} ms; N2 {'from the file' if r.n2_measured else 'constant (no n2_pct column)'}",
+              f"- sample period {1e3 * r.frame_s:g} ms; N2 "
+              f"{'from the file' if r.n2_measured else 'constant (no n2_pct column)'}",
               f"- held-out samples scored: {r.heldout.n_scored}", "",
               "## Decision", "", f"Rule: {r.decision_rule}.", "",
               f"Noise model: Gaussian residuals, sigma {r.noise.sigma_mm_s:.3f} mm/s (recalibrated model), correlation "
               f"time tau = {r.noise.tau:.1f} samples, n = {r.noise.n}, n_eff = n / tau = {r.noise.n_eff:.0f}; "
               "BIC = n_eff ln(RSS/n) + k ln(n_eff).", "",
-              "| rank | effect | BIC | dBIC vs none | held-out gap [mm/s] | reduction vs recalibrated | eligible | parameters |",
+              "| rank | effect | BIC | dBIC vs none | held-out gap [mm/s] | reduction vs recalibrated | eligible "
+              "| parameters |",
               "|---|---|---|---|---|---|---|---|"]
     for j, c in enumerate(r.ranking, 1):
         params = ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
@@ -222,20 +226,22 @@ def _discrepancy_markdown(result, model_file: str, data_name: str) -> str:
                      f"{100 * c.gap_reduction:+.0f} % | {'yes' if c.eligible else 'no'} | {params} |")
     lines += ["", "## Curves (held-out flights)", "", "![curves](curves.png)", "",
               "## Residual maps", "", "Mean residual (measured - model) per current bin and current direction:", "",
-              "![residual map](residual_map.png)", "", "Misfit score (mean z^2 of the curve cells, 1 = noise) per operating region:", "",
+              "![residual map](residual_map.png)", "",
+              "Misfit score (mean z^2 of the curve cells, 1 = noise) per operating region:", "",
               "![regions](regions.png)", "",
-              "| factor | level | samples | score before | score after | local gap before [mm/s] | local gap after [mm/s] |",
+              "| factor | level | samples | score before | score after | local gap before [mm/s] "
+              "| local gap after [mm/s] |",
               "|---|---|---|---|---|---|---|"]
     for lv in r.maps["recalibrated"].levels:
         after = r.maps["augmented"].level(lv.factor, lv.level)
         lines.append(f"| {lv.factor} | {lv.level} | {lv.count} | {_fmt(lv.score)} | "
                      f"{_fmt(after.score if after else np.nan)} | {_fmt(lv.local_gap_mm_s)} | "
                      f"{_fmt(after.local_gap_mm_s if after else np.nan)} |")
-    lines += ["", "## Model", "", f"Augmented model: `{model_file}` (fleet mean of the per-unit recalibration, plus the "
-              "named effect). Simulate with it:", "", "```", f"fuelhm-bench simulate --model {model_file} --out flights.parquet",
+    lines += ["", "## Model", "",
+              f"Augmented model: `{model_file}` (fleet mean of the per-unit recalibration, plus the "
+              "named effect). Simulate with it:", "", "```",
+              f"fuelhm-bench simulate --model {model_file} --out flights.parquet",
               "```", "", "Recalibrated parameters (fleet values):", "", "| parameter | value |", "|---|---|"]
-    from fuelhm_bench.calibration.recalibrate import RECALIBRATION_PARAMETERS
-
     for p in RECALIBRATION_PARAMETERS:
         lines.append(f"| `{p.path}` | {r.model.get(p.path):.5g} {p.unit} |")
     lines += ["", f"Run time: {r.seconds:.1f} s.", ""]

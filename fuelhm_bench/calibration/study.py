@@ -46,6 +46,13 @@ class StudyCase:
         Held-out gaps [mm/s].
     seconds : float
         Wall time of the workflow [s].
+    runner_up : str
+        Best-ranked (lowest BIC) candidate other than the hidden effect and ``none``.
+    runner_up_delta_bic : float
+        Its BIC gain over recalibration alone.
+    max_wrong_reduction : float
+        Largest held-out gap reduction (relative to recalibration alone) of a candidate other
+        than the hidden effect: the margin of the decision rule's second condition.
     """
 
     hidden: str
@@ -57,6 +64,9 @@ class StudyCase:
     gap_recalibrated: float
     gap_after: float
     seconds: float
+    runner_up: str = ""
+    runner_up_delta_bic: float = float("nan")
+    max_wrong_reduction: float = float("nan")
 
     @property
     def correct(self) -> bool:
@@ -117,8 +127,12 @@ def run_study(effects: Sequence[str] = EFFECT_IDS + ("none",), seeds: Sequence[i
                 magnitude = float(truth.parameters[main]) if main else float("nan")
                 fitted = float(result.parameters.get(main, float("nan"))) if main and result.effect == effect \
                     else float("nan")
+                others = [c for c in result.ranking if c.effect not in ("none", effect)]
+                runner = others[0] if others else None
                 case = StudyCase(effect, int(seed), magnitude, result.effect, fitted, result.gap_before,
-                                 result.gap_recalibrated, result.gap_after, time.perf_counter() - t0)
+                                 result.gap_recalibrated, result.gap_after, time.perf_counter() - t0,
+                                 runner.effect if runner else "", runner.delta_bic if runner else float("nan"),
+                                 max((c.gap_reduction for c in others), default=float("nan")))
                 cases.append(case)
                 if progress is not None:
                     progress(case)
@@ -134,8 +148,9 @@ def summarize(cases: Sequence[StudyCase]) -> pd.DataFrame:
         One row per hidden effect: ``cases``, ``accuracy`` (named the hidden effect, or
         ``none`` for ``none``), ``false_discovery`` (for ``none``: an effect was named),
         ``wrong_effect`` (another effect named), ``missed`` (``none`` named), median and minimum
-        held-out gap reduction, median |relative error| of the main parameter when named,
-        median wall time [s].
+        held-out gap reduction, median |relative error| of the main parameter when named, the
+        largest held-out gap reduction of a wrong candidate (the margin of the decision rule's
+        second condition), median wall time [s].
     """
     rows = []
     for hidden in dict.fromkeys(c.hidden for c in cases):
@@ -153,6 +168,8 @@ def summarize(cases: Sequence[StudyCase]) -> pd.DataFrame:
             "median_gap_reduction": float(np.median(red)),
             "min_gap_reduction": float(np.min(red)),
             "median_parameter_error": float(np.median(rel)) if rel else float("nan"),
+            "max_wrong_reduction": float(np.nanmax([c.max_wrong_reduction for c in sub]))
+            if any(np.isfinite(c.max_wrong_reduction) for c in sub) else float("nan"),
             "median_seconds": float(np.median([c.seconds for c in sub])),
         })
     return pd.DataFrame(rows)

@@ -1,0 +1,57 @@
+"""Wall time of the discrepancy workflow on 20 flights of 20 minutes (pytest-benchmark).
+
+Run separately::
+
+    pytest tests/bench_discrepancy.py --benchmark-only -m benchmark -p no:cacheprovider -s
+
+The data set: 4 units x 5 flights of 20 min at 100 Hz (2.4 million samples) with
+``rod_friction`` hidden (the slowest candidate to fit: the simulator solves the rod force
+balance at every frame for it), written to Parquet and read back as the command would.
+The timed region is the whole workflow (split, recalibration, five candidates on two worker
+processes, decision, held-out evaluation, region maps), one round. Target: <= 120 s on the
+2-core development machine. The measured figures are printed and stored in ``extra_info``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy
+from fuelhm_bench.calibration.synthetic import hidden_effect_flights
+from fuelhm_bench.io import read_flights, split_flights, write_flights
+
+TARGET_S = 120.0
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    frame, case = hidden_effect_flights("rod_friction", n_units=4, n_flights=5, minutes=20.0, seed=3)
+    path = write_flights(frame, tmp_path_factory.mktemp("bench") / "measured.parquet")
+    flights, rejected = split_flights(read_flights(path), source=str(path))
+    assert len(flights) == 20 and not rejected
+    # Compile (or load from cache) the kernels outside the timed region.
+    find_discrepancy(flights[:2], config=DiscrepancyConfig(candidates=("lvdt_lag",), n_jobs=1))
+    return flights, case
+
+
+@pytest.mark.benchmark
+def test_discrepancy_on_20_flights_of_20_minutes(benchmark, fleet):
+    flights, case = fleet
+    config = DiscrepancyConfig(n_jobs=2)
+    t0 = time.perf_counter()
+    result = benchmark.pedantic(find_discrepancy, args=(flights,), kwargs={"config": config}, rounds=1,
+                                iterations=1)
+    seconds = time.perf_counter() - t0
+    benchmark.extra_info.update({"seconds": seconds, "effect": result.effect, "gap_before": result.gap_before,
+                                 "gap_after": result.gap_after, "target_s": TARGET_S})
+    print(f"\ndiscrepancy workflow, 20 flights x 20 min: {seconds:.1f} s (target {TARGET_S:g} s); named "
+          f"{result.effect} (hidden {case.effect}, coulomb {case.parameters['coulomb_n']:.0f} N -> "
+          f"{result.parameters.get('coulomb_n', float('nan')):.0f} N); held-out gap {result.gap_before:.3f} -> "
+          f"{result.gap_recalibrated:.3f} -> {result.gap_after:.3f} mm/s")
+    for c in result.ranking:
+        print(f"  {c.effect:18s} dBIC {c.delta_bic:10.1f}  held-out gap {c.gap_after:.3f} mm/s  "
+              f"{c.passes} replays  {c.seconds:.1f} s")
+    assert result.effect == "rod_friction"
+    assert seconds <= TARGET_S
