@@ -149,8 +149,11 @@ def simulate(models: Sequence, inputs: Sequence[FlightInputs], rngs: Sequence[np
     demand = np.zeros((nb, n_max))
     n2s = np.zeros((nb, n_max))
     noise = np.zeros((nb, n_max))
-    i_open = np.full((nb, n_max), np.nan)
-    x_force = np.full((nb, n_max), np.nan)
+    # Open-loop currents and forced positions only take memory when some flight uses them.
+    any_open = any(inp.open_loop_current_a is not None for inp in inputs)
+    any_force = any(inp.forced_position_m is not None for inp in inputs)
+    i_open = np.full((nb, n_max if any_open else 1), np.nan)
+    x_force = np.full((nb, n_max if any_force else 1), np.nan)
     x0 = np.zeros(nb)
     lengths = np.zeros(nb, dtype=np.int64)
     for b, (model, inp, rng) in enumerate(zip(models, inputs, rngs)):
@@ -187,11 +190,16 @@ def simulate(models: Sequence, inputs: Sequence[FlightInputs], rngs: Sequence[np
     kernel.simulate_batch(cs, ks, lvs, tab, use, lengths, demand, n2s, noise, i_open, x_force, x0,
                           out_i, out_y, out_x, out_v, status)
     results = []
+    times: dict[tuple[int, float], np.ndarray] = {}  # one read-only time vector per (length, frame)
     for b in range(nb):
         if status[b] != kernel.STATUS_OK:
             name = labels[b] if labels is not None else f"flight {b} of the batch"
             raise NumericalError(f"The simulator produced a non-finite value for {name}; "
                                  f"check its parameters (model: {models[b]!r:.200}).")
         n = lengths[b]
-        results.append(SimOutput(inputs[b].time_s, out_i[b, :n], out_y[b, :n], out_x[b, :n], out_v[b, :n]))
+        key = (int(n), float(inputs[b].frame_s))
+        if key not in times:
+            times[key] = inputs[b].time_s
+            times[key].flags.writeable = False
+        results.append(SimOutput(times[key], out_i[b, :n], out_y[b, :n], out_x[b, :n], out_v[b, :n]))
     return results
