@@ -167,7 +167,7 @@ def simulate(models: Sequence, inputs: Sequence[FlightInputs], rngs: Sequence[np
         lengths[b] = n
         demand[b, :n] = inp.demand_m
         n2s[b, :n] = inp.n2_frac
-        noise[b, :n] = rng.standard_normal(n)
+        rng.standard_normal(out=noise[b, :n])  # same draws as standard_normal(n), without a copy
         if inp.open_loop_current_a is not None:
             i_open[b, :n] = inp.open_loop_current_a
         if inp.forced_position_m is not None:
