@@ -34,6 +34,7 @@ Given measured healthy flights and a model (nominal by default):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import multiprocessing
 import time
@@ -510,10 +511,20 @@ def _run_candidates(cands: list, payload: dict, n_jobs: int, progress) -> dict:
 
 
 # --------------------------------------------------------------------------- decision
+def is_eligible(outcome: CandidateOutcome, *, bic_threshold: float, min_gap_reduction: float) -> bool:
+    """Whether a candidate earns its parameters: BIC gain > ``bic_threshold`` and held-out gap reduction
+    >= ``min_gap_reduction`` (both relative to recalibration alone)."""
+    return (outcome.effect != "none" and outcome.delta_bic > bic_threshold
+            and outcome.gap_reduction >= min_gap_reduction)
+
+
 def decide(outcomes: Sequence[CandidateOutcome], *, bic_threshold: float, min_gap_reduction: float) -> str:
-    """Apply the decision rule (:attr:`DiscrepancyConfig.decision_rule`): an effect id or ``"none"``."""
-    eligible = [c for c in outcomes if c.effect != "none" and c.delta_bic > bic_threshold
-                and c.gap_reduction >= min_gap_reduction]
+    """Apply the decision rule (:attr:`DiscrepancyConfig.decision_rule`): an effect id or ``"none"``.
+
+    Among the eligible candidates (:func:`is_eligible`), the one with the lowest BIC.
+    """
+    eligible = [c for c in outcomes
+                if is_eligible(c, bic_threshold=bic_threshold, min_gap_reduction=min_gap_reduction)]
     if not eligible:
         return "none"
     return min(eligible, key=lambda c: c.bic).effect
@@ -622,14 +633,13 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         bic = noise.bic(res.rss, res.n_parameters)
         eff_model = res.unit_models[next(iter(res.unit_models))].effect(cand.effect)
         red = 1.0 - g / g_recal if g_recal > 0 else 0.0
-        outcomes.append(CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, bic0 - bic, res.rss, g,
-                                         red, False, res.passes, sec, res.unit_values))
+        outcomes.append(CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, bic0 - bic, res.rss,
+                                         g, red, False, res.passes, sec, res.unit_values))
         say(f"candidate {cand.effect}: dBIC {bic0 - bic:.1f}, held-out gap {g:.3f} mm/s ({100 * red:+.0f} %), "
             f"{res.passes} replays, {sec:.1f} s")
-    chosen = decide(outcomes, bic_threshold=config.bic_threshold, min_gap_reduction=config.min_gap_reduction)
-    outcomes = [CandidateOutcome(**{**c.__dict__, "eligible": (c.effect != "none" and c.delta_bic > config.bic_threshold
-                                                              and c.gap_reduction >= config.min_gap_reduction)})
-                for c in outcomes]
+    rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_gap_reduction}
+    chosen = decide(outcomes, **rule)
+    outcomes = [dataclasses.replace(c, eligible=is_eligible(c, **rule)) for c in outcomes]
     ranking = tuple(sorted(outcomes, key=lambda c: c.bic))
 
     if chosen == "none":
@@ -642,7 +652,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         v_after = held_velocity(heldout_models(res.unit_models, final_model, held_sets))
         eff_params = dict(effect_parameters(final_model.effect(chosen)))
     fleet_models = {k: (base.unit_models.get(k, fleet0)) for k in held_sets}
-    levels = sample_levels(held, fleet_models, lambda fi: NO_UNIT if held.unit_ids[fi] is None else held.unit_ids[fi])
+    levels = sample_levels(held, fleet_models,
+                           lambda fi: NO_UNIT if held.unit_ids[fi] is None else held.unit_ids[fi])
     maps = {"input": region_map(held, v_input, levels, cal.curve, noise.tau),
             "recalibrated": region_map(held, v_recal, levels, cal.curve, noise.tau),
             "augmented": region_map(held, v_after, levels, cal.curve, noise.tau)}
@@ -664,4 +675,4 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
 
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "NoiseModel", "decide",
-           "find_discrepancy", "noise_model", "split_fit_holdout"]
+           "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout"]
