@@ -34,8 +34,8 @@ not scored.
 
 Sample selection
 ----------------
-Flights are cut into *runs* of uniform sampling (an interval longer than
-``gap_factor`` frames, or shorter than ``1 - frame_tolerance`` frames, splits a flight).
+Flights are cut into *runs* of uniform sampling (an interval differing from the frame by
+more than ``frame_tolerance``, such as a gap, splits a flight).
 A sample is *valid* if its differentiator window is complete, N2 is finite, the rod is
 not within ``end_stop_margin_mm`` of an end stop of the model's stroke (nor within
 ``end_stop_dilate_s`` of such a sample), and it is not a
@@ -85,10 +85,9 @@ class ReplayConfig:
         Margin around a flight's current extremes for the stall mask [mA].
     stall_velocity_mm_s : float, default=1.0
         A sample at a current extreme moving slower than this is a stall (masked) [mm/s].
-    gap_factor : float, default=1.5
-        An interval longer than ``gap_factor`` frames splits a flight [-].
     frame_tolerance : float, default=0.05
-        Relative deviation of an interval from the frame still taken as uniform [-].
+        Relative deviation of an interval from the frame still taken as uniform [-]; a longer
+        (a gap) or shorter interval splits the flight.
     direction_rate_ma_s : float, default=2.0
         Current rate separating rising / falling from steady samples [mA/s].
     moving_velocity_mm_s : float, default=2.0
@@ -111,7 +110,6 @@ class ReplayConfig:
     end_stop_dilate_s: float = 0.3
     current_limit_margin_ma: float = 0.05
     stall_velocity_mm_s: float = 1.0
-    gap_factor: float = 1.5
     frame_tolerance: float = 0.05
     direction_rate_ma_s: float = 2.0
     moving_velocity_mm_s: float = 2.0
@@ -127,7 +125,7 @@ class ReplayConfig:
         for name, lo, hi in (("n2_default_pct", 30.0, 110.0), ("end_stop_margin_mm", 0.0, 10.0),
                              ("end_stop_dilate_s", 0.0, 10.0),
                              ("current_limit_margin_ma", 0.0, 5.0), ("stall_velocity_mm_s", 0.0, 50.0),
-                             ("gap_factor", 1.01, 100.0), ("frame_tolerance", 0.0, 0.5),
+                             ("frame_tolerance", 0.0, 0.5),
                              ("direction_rate_ma_s", 0.0, 1e4), ("moving_velocity_mm_s", 0.0, 100.0),
                              ("warmup_s", 0.0, 10.0), ("idle_block_s", 0.01, 100.0),
                              ("max_segment_s", 0.05, 1e4), ("idle_share", 0.0, 0.9)):
@@ -236,8 +234,7 @@ def estimate_frame(flights) -> float:
 def _runs(time_s: np.ndarray, frame_s: float, cfg: ReplayConfig) -> list[tuple[int, int]]:
     """(start, stop) of the runs of uniform sampling of one flight."""
     dt = np.diff(time_s)
-    bad = (dt > cfg.gap_factor * frame_s) | (dt < (1.0 - cfg.frame_tolerance) * frame_s) | \
-          (dt > (1.0 + cfg.frame_tolerance) * frame_s)
+    bad = np.abs(dt - frame_s) > cfg.frame_tolerance * frame_s
     cuts = np.flatnonzero(bad) + 1
     bounds = np.concatenate([[0], cuts, [time_s.shape[0]]])
     return [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b - a > 2 * cfg.half_width + 1]

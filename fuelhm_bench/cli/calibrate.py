@@ -7,6 +7,8 @@ import sys
 
 
 def register(sub) -> None:
+    from fuelhm_bench.cli._common import non_negative_int
+
     p = sub.add_parser(
         "calibrate", help="recalibrate the model's identifiable parameters on measured healthy flights",
         description="Fit the recalibration subset (null bias, slot widths, width transition, rated current, "
@@ -21,21 +23,18 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="output model file (YAML)")
     p.add_argument("--model", metavar="YAML", help="start model (default: nominal)")
     p.add_argument("--plot", metavar="FILE", help="write the curves before/after over the data (PNG, like Fig. 7)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sample selection (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sample selection (default 0)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from fuelhm_bench.calibration.recalibrate import CalibrationConfig, recalibrate
+    from fuelhm_bench.calibration.recalibrate import RECALIBRATION_PARAMETERS, CalibrationConfig, recalibrate
     from fuelhm_bench.calibration.report import calibration_summary, plot_curves
     from fuelhm_bench.cli._common import check_output, progress_bar
-    from fuelhm_bench.errors import ParameterError
     from fuelhm_bench.io import read_flights, split_flights
     from fuelhm_bench.physics.model import load_model, save_model
 
-    if args.seed < 0:
-        raise ParameterError(f"--seed must be an integer >= 0. Got {args.seed} instead.")
     out = check_output(args.out, force=args.force)
     plot = check_output(args.plot, force=args.force) if args.plot else None
     start = load_model(args.model) if args.model else None
@@ -43,7 +42,9 @@ def run(args: argparse.Namespace) -> int:
     for r in rejected:
         print(f"warning: {r}", file=sys.stderr)
     config = CalibrationConfig(seed=args.seed)
-    with progress_bar(config.max_iterations * 10, "recalibrating", unit="replay") as bar:
+    n_par = len(RECALIBRATION_PARAMETERS)
+    # Upper bound of the replays: one per iteration plus one Jacobian (n_par replays) per iteration.
+    with progress_bar(config.max_iterations * (1 + n_par) + 1, "recalibrating", unit="replay") as bar:
         result = recalibrate(flights, start, config=config, progress=bar.update)
     header = (f"fuelhm-bench calibrate {args.flights}: {len(flights)} flight(s), {len(result.unit_models)} unit(s)\n"
               f"gap (RMS velocity residual over the curve) {result.gap_before:.3f} -> {result.gap_fleet:.3f} mm/s "

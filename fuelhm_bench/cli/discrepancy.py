@@ -7,6 +7,7 @@ import sys
 
 
 def register(sub) -> None:
+    from fuelhm_bench.cli._common import non_negative_int, positive_int
     from fuelhm_bench.taxonomy import EFFECT_IDS
 
     p = sub.add_parser(
@@ -21,12 +22,13 @@ def register(sub) -> None:
     p.add_argument("--model", metavar="YAML", help="model to examine (default: nominal)")
     p.add_argument("--out", metavar="DIR", help="write report.md, figures, result.json and augmented_model.yaml here")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout (logs on stderr)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the fit/held-out split and sample draws (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seed of the fit/held-out split and sample draws (default 0)")
     p.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
                    help="share of the flights held out (default 0.3)")
     p.add_argument("--candidates", default=",".join(EFFECT_IDS), metavar="IDS",
                    help="comma-separated candidate effects (default: all)")
-    p.add_argument("--jobs", type=int, default=2, help="worker processes for the candidate fits (default 2)")
+    p.add_argument("--jobs", type=positive_int, default=2, help="worker processes for the candidate fits (default 2)")
     p.add_argument("--force", action="store_true", help="overwrite existing files in --out")
     p.set_defaults(func=run)
 
@@ -40,14 +42,10 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy
     from fuelhm_bench.calibration.report import json_text, write_discrepancy_report
     from fuelhm_bench.cli._common import check_output_dir, progress_bar
-    from fuelhm_bench.errors import OutputPathError, ParameterError
+    from fuelhm_bench.errors import OutputPathError
     from fuelhm_bench.io import read_flights, split_flights
     from fuelhm_bench.physics.model import load_model, save_model
 
-    if args.seed < 0:
-        raise ParameterError(f"--seed must be an integer >= 0. Got {args.seed} instead.")
-    if args.jobs < 1:
-        raise ParameterError(f"--jobs must be an integer >= 1. Got {args.jobs} instead.")
     candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
     config = DiscrepancyConfig(holdout_fraction=args.holdout, candidates=candidates, n_jobs=args.jobs,
                                seed=args.seed)
