@@ -17,12 +17,14 @@ SHORT = MissionProfile(duration_s=300.0)
 @pytest.fixture(scope="module")
 def doe_table():
     return run_doe(DesignOfExperiments(n_units=2, intensities=(0.5, 1.0), mission=SHORT,
-                                       modes=("null_bias_drift", "internal_leakage", "diaphragm_clogging")))
+                                       modes=("null_bias_drift", "internal_leakage", "diaphragm_clogging",
+                                              "filter_contamination")))
 
 
 def test_doe_pairs_every_case_per_unit(doe_table):
-    assert len(doe_table) == 2 * (1 + 3 * 2)
-    assert set(doe_table["mode"]) == {"healthy", "null_bias_drift", "internal_leakage", "diaphragm_clogging"}
+    assert len(doe_table) == 2 * (1 + 4 * 2)
+    assert set(doe_table["mode"]) == {"healthy", "null_bias_drift", "internal_leakage", "diaphragm_clogging",
+                                      "filter_contamination"}
     assert set(INDICATOR_NAMES) <= set(doe_table.columns)
 
 
@@ -43,6 +45,21 @@ def test_leakage_and_clogging_move_idle_current_oppositely(doe_table):
     a = fit_itl(doe_table).matrix("A")
     assert a.loc["internal_leakage", "I0"] < -0.3      # the valve must feed the leak: I0 moves away from Inb
     assert a.loc["diaphragm_clogging", "I0"] > 0.1     # less cooling flow: |I0 - Inb| shrinks
+    # The leak shifts the curve vertically near the slope changes (paper Table IV: Y1, Y2), not Inb.
+    assert abs(a.loc["internal_leakage", "Y1"]) > 2.0  # mm/s at full intensity
+    assert abs(a.loc["internal_leakage", "Inb"]) < 0.3
+
+
+def test_filter_contamination_scales_the_gains_down(doe_table):
+    """PHYSICS.md section 4: gains and Y1, Y2 scale down. (In flight data X1 also moves inward by
+    ~0.4 mA at half intensity, and at full intensity the null gain is so low that the extractor flags
+    the curve indicators; the law is fitted on the valid flights.)"""
+    from fuelhm_bench.diagnosis.itl import fit_itl
+
+    a = fit_itl(doe_table).matrix("A")
+    healthy = doe_table[doe_table["mode"] == "healthy"]
+    for gain in ("G_in", "G_out", "G_null"):
+        assert a.loc["filter_contamination", gain] < -0.4 * healthy[gain].mean()  # >= 40 % lower at f = 1
 
 
 def test_indicators_command_on_simulated_and_hand_made_csv(tmp_path, capsys):
