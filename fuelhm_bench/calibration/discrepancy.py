@@ -182,29 +182,34 @@ class NoiseModel:
         return self.n_eff * math.log(max(rss, 1e-300) / self.n) + k * math.log(self.n_eff)
 
 
-def noise_model(fit: JointFit, sets: dict) -> NoiseModel:
-    """Estimate :class:`NoiseModel` from a fit's residuals (see its docstring)."""
-    vs = rp.replay_batch([fit.unit_models[k] for k in sets], [sets[k] for k in sets])
-    num = np.zeros(1 + 4 * max(rs.config.half_width for rs in sets.values()))
-    lags = num.shape[0] - 1
+def correlation_time(sets: Sequence[rp.ReplaySet], velocities: Sequence[np.ndarray]) -> float:
+    """Integrated autocorrelation time of the residuals ``v_meas - v`` [samples], ``>= 1``.
+
+    ``tau = 1 + 2 sum_{l=1}^{L} rho_l`` with the autocorrelations ``rho_l`` pooled over the
+    segments of the sets (scored samples only, ``L = 4 h`` lags).
+    """
+    lags = 4 * max(rs.config.half_width for rs in sets)
+    num = np.zeros(lags + 1)
     den = 0.0
-    total = []
-    for (k, rs), v in zip(sets.items(), vs):
+    for rs, v in zip(sets, velocities):
         r = np.where(rs.scored, rs.v_meas_mm_s - v, np.nan)
         for s, n in zip(rs.starts, rs.lengths):
             seg = r[s:s + n]
             seg = seg[np.isfinite(seg)]
             if seg.size <= lags + 1:
                 continue
-            total.append(seg)
             den += float(seg @ seg)
             for lag in range(1, lags + 1):
                 num[lag] += float(seg[:-lag] @ seg[lag:])
-    if den <= 0.0 or not total:
-        return NoiseModel(max(fit.n_residuals, 1), 1.0, fit.rms)
-    rho = num[1:] / den
-    tau = max(1.0, 1.0 + 2.0 * float(np.sum(rho)))
-    return NoiseModel(fit.n_residuals, tau, fit.rms)
+    if den <= 0.0:
+        return 1.0
+    return max(1.0, 1.0 + 2.0 * float(np.sum(num[1:] / den)))
+
+
+def noise_model(fit: JointFit, sets: dict) -> NoiseModel:
+    """Estimate :class:`NoiseModel` from a fit's residuals (see its docstring)."""
+    vs = rp.replay_batch([fit.unit_models[k] for k in sets], [sets[k] for k in sets])
+    return NoiseModel(max(fit.n_residuals, 1), correlation_time(list(sets.values()), vs), fit.rms)
 
 
 @dataclass(frozen=True)
@@ -277,8 +282,8 @@ class DiscrepancyResult:
         Held-out gap [mm/s]: input model, recalibrated model, recalibrated + named effect.
     gap_floor : float
         Noise floor of the held-out gap of the final model [mm/s]
-        (:func:`~fuelhm_bench.calibration.curve.gap_noise_floor`): a ``gap_after`` near it
-        leaves nothing but noise to explain.
+        (:func:`~fuelhm_bench.calibration.curve.gap_noise_floor`, with the correlation time of
+        its own held-out residuals): a ``gap_after`` near it leaves nothing but noise to explain.
     ranking : tuple of CandidateOutcome
         All candidates and ``none``, by increasing BIC.
     model : LoopModel
@@ -657,7 +662,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     maps = {"input": region_map(held, v_input, levels, cal.curve, noise.tau),
             "recalibrated": region_map(held, v_recal, levels, cal.curve, noise.tau),
             "augmented": region_map(held, v_after, levels, cal.curve, noise.tau)}
-    floor = gap_noise_floor(held, v_after, cal.curve, noise.tau)
+    floor = gap_noise_floor(held, v_after, cal.curve, correlation_time([held], [v_after]))
     region = maps["recalibrated"].concentration()
     if not maps["recalibrated"].score > SIGNIFICANT_SCORE:
         region = (f"no significant disagreement (misfit score {maps['recalibrated'].score:.2g} over the held-out "
@@ -675,4 +680,4 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
 
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "NoiseModel", "decide",
-           "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout"]
+           "correlation_time", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout"]
