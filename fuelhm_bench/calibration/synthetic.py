@@ -5,9 +5,11 @@
 :func:`~fuelhm_bench.physics.model.manufacture`, LVDT noise and quantization) from a nominal
 model that has one optional effect switched on: the "truth" a nominal model lacks. The
 effect's main parameter is drawn log-uniformly (seeded) in :data:`TEST_RANGES`, a
-sub-range of its documented range in which the effect is strong enough to matter on the
-velocity-gain curve of short flights (the lower ends are where the workflow still names
-the effect at default noise; below them an effect is, for this data, not a discrepancy).
+sub-range of its documented range where the effect matters on the velocity-gain curve of
+short flights and stays physically plausible (a load stiffness of 5e5 N/m would need 30 kN
+over the stroke). The lower ends are conservative: on 2 units x 3 flights of 4 minutes the
+workflow still names every effect at a quarter of them, except ``rod_friction`` (named at
+75 N, missed twice in three at 37.5 N; ``docs/discrepancy.md``).
 """
 
 from __future__ import annotations
