@@ -1,5 +1,7 @@
 """fuelhm-bench: a health-monitoring benchmark for a turbofan fuel-system actuation loop."""
 
+from fuelhm_bench import _numba_cache  # noqa: F401 - first: numba caches go outside the package
+
 from fuelhm_bench.taxonomy import EFFECT_IDS, INDICATOR_NAMES, INDICATOR_UNITS, MODE_IDS
 
 __version__ = "0.1.0"

@@ -291,6 +291,8 @@ class EnvOutcome:
         Scenario id.
     fidelity : str
         Fidelity of the scored flights.
+    costs : CostSpec or None
+        The scenario's cost model (``cost_kusd``; None: the default CostSpec).
     """
 
     method: str
@@ -303,6 +305,7 @@ class EnvOutcome:
     seconds: float = 0.0
     scenario: str = ""
     fidelity: str = ""
+    costs: Any = None
 
     @property
     def ok(self) -> bool:
@@ -311,8 +314,19 @@ class EnvOutcome:
 
     @property
     def cost_kusd(self) -> float:
-        """Total cost of the method's decisions over the scored fleet [kUSD] (NaN unless ok)."""
-        return float(-self.episodes["return_kusd"].sum()) if self.ok else float("nan")
+        """Total cost of the method's decisions over the scored fleet [kUSD] (NaN unless ok).
+
+        Replayed under the scenario's maintenance protocol
+        (:func:`fuelhm_bench.scoring.maintenance_cost`): an alarm triggers an
+        inspection, the diagnosis decides what is replaced, a failure costs
+        what the cost model says.
+        """
+        if not self.ok:
+            return float("nan")
+        from fuelhm_bench.scenarios import CostSpec
+        from fuelhm_bench.scoring import total_cost
+
+        return total_cost(self.run(), self.costs if self.costs is not None else CostSpec())
 
     def run(self, name: str | None = None):
         """The :class:`fuelhm_bench.scoring.Run` of this outcome.
@@ -445,7 +459,8 @@ def run_in_env(method, evaluation: EnvEvaluation, *, random_state: int = 0, time
         raise ParameterError(f"The 'timeout_s' parameter of run_in_env must be a number > 0. Got {timeout_s!r} "
                              f"instead.")
     name = repr(method)
-    meta = {"scenario": evaluation.scenario.id, "fidelity": evaluation.fidelity}
+    meta = {"scenario": evaluation.scenario.id, "fidelity": evaluation.fidelity,
+            "costs": evaluation.scenario.costs}
     ctx = multiprocessing.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(method, evaluation, random_state, child), daemon=True)

@@ -105,18 +105,26 @@ def test_physics_runner_reproduces_the_evaluation_pipeline(cache_dir):
 
 
 def test_surrogate_null_method_cost_is_the_cost_model(surrogate_eval):
-    """A never-alarming method pays undetected_flight_kusd per detectable flight and failure_kusd per failure."""
+    """A never-alarming method pays undetected_flight_kusd per detectable flight and failure_kusd per failure;
+    a failure overhauls the unit (every present mode is removed), as the maintenance protocol says."""
     outcome = run_in_env(NullMethod(), surrogate_eval)
     assert outcome.ok and outcome.fidelity == "surrogate" and outcome.scenario == "tiny-v1"
     costs = surrogate_eval.scenario.costs
-    inten = outcome.labels[[f"intensity_{m}" for m in MODE_IDS]].to_numpy()
-    maxi = outcome.labels[[f"max_intensity_{m}" for m in MODE_IDS]].to_numpy()
-    detectable = ((inten > 0) & (inten >= costs.detectable_fraction * maxi)).any(axis=1)
-    failed = (inten > 0) & (inten >= costs.failure_fraction * maxi)
-    first_failures = sum(int(failed[outcome.labels["unit_id"].to_numpy() == k][:, j].any())
-                         for k in range(3) for j in range(7))
-    expected = detectable.sum() * costs.undetected_flight_kusd + first_failures * costs.failure_kusd
-    assert first_failures >= 1 and outcome.cost_kusd == pytest.approx(expected)
+    assert outcome.costs == costs
+    expected, failures = 0.0, 0
+    for _, unit in outcome.labels.groupby("unit_id"):
+        inten = unit[[f"intensity_{m}" for m in MODE_IDS]].to_numpy()
+        maxi = unit[[f"max_intensity_{m}" for m in MODE_IDS]].to_numpy()
+        removed = np.zeros(7, bool)
+        for t in range(len(unit)):
+            present = (inten[t] > 0) & ~removed
+            expected += costs.undetected_flight_kusd * (present & (inten[t] >= costs.detectable_fraction
+                                                                   * maxi[t])).any()
+            if (present & (inten[t] >= costs.failure_fraction * maxi[t])).any():
+                expected += costs.failure_kusd
+                failures += 1
+                removed |= present
+    assert failures >= 1 and outcome.cost_kusd == pytest.approx(expected)
     kpis = outcome.kpis()
     assert kpis["fnr_standard_alarm"] == 1.0 and kpis["cost_kusd"] == outcome.cost_kusd
     assert list(outcome.episodes["unit_id"]) == [0, 1, 2]

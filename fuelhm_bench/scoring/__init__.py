@@ -16,6 +16,8 @@ robustness, robustness_table
     Nominal vs drifted runs.
 perfect_decisions, null_decisions
     Reference decisions (oracle and never-alarm).
+maintenance_cost, total_cost
+    Cost of the decisions under a scenario's cost model, replayed with maintenance.
 to_markdown, to_latex, write_tables, plot_score_distributions, save_figure
     Export.
 
@@ -23,6 +25,7 @@ See docs/scoring.md for every definition with worked examples.
 """
 
 from fuelhm_bench.scoring.config import ScoringConfig
+from fuelhm_bench.scoring.cost import maintenance_cost, total_cost
 from fuelhm_bench.scoring.delay import delay_summary, detection_delays
 from fuelhm_bench.scoring.detection import (ALL_MODES, METHOD_ALARM, detection_by_band,
                                             detection_table)
@@ -45,8 +48,8 @@ __all__ = [
     "MULTIPLE", "NO_ALARM", "Run", "Scorecard", "ScoringConfig", "TIE", "bootstrap_ratio_interval",
     "classification_table", "confusion_matrix", "delay_summary", "detection_by_band",
     "detection_delays", "detection_table", "diagnosis_table", "fit_healthy_model",
-    "flight_table", "headline_kpis", "null_decisions", "perfect_decisions",
+    "flight_table", "headline_kpis", "maintenance_cost", "null_decisions", "perfect_decisions",
     "plot_score_distributions", "rates_with_intervals", "robustness", "robustness_table",
     "save_figure", "score_run", "summary_components", "summary_score", "threshold_table",
-    "to_latex", "to_markdown", "wilson_interval", "write_tables",
+    "to_latex", "to_markdown", "total_cost", "wilson_interval", "write_tables",
 ]
