@@ -18,6 +18,13 @@ Conventions shared by the baselines
 * **Training sequences.** Per-unit smoothing needs the training flights in
   flight order: they are grouped by ``unit_id`` and sorted by
   ``flight_index`` when those columns exist (:func:`training_sequences`).
+* **Standardisation needs few flights.** A method that uses the healthy model
+  only to turn indicators into Z-scores needs each indicator's mean and
+  standard deviation, not their correlation: :func:`standardisation` fits it
+  from as few as :data:`STANDARDISATION_MIN_FLIGHTS` flights (the full
+  Mahalanobis model needs ``n_features + 1``). This is what lets such methods
+  learn from a scarce healthy set (scenario ``low_data``: 12 fit flights,
+  cross-fitted in folds of 9-10).
 """
 
 from __future__ import annotations
@@ -27,19 +34,23 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.diagnosis import ITL, ITL_COLUMNS, collinearity_guilt
+from fuelhm_bench.diagnosis import ITL, ITL_COLUMNS, HealthyModel, collinearity_guilt
 from fuelhm_bench.methods import Knowledge, normalize_guilt
 from fuelhm_bench.methods.params import Constraint
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 
 __all__ = [
-    "INDICATORS", "ModeSubset", "collinearity_guilt_7", "cross_fit_folds", "indicator_values",
-    "itl_coefficients", "reference_signatures", "row_values", "sklearn_seed",
-    "training_sequences", "window_mean",
+    "INDICATORS", "STANDARDISATION_MIN_FLIGHTS", "ModeSubset", "collinearity_guilt_7",
+    "cross_fit_folds", "indicator_values", "itl_coefficients", "reference_signatures", "row_values",
+    "sklearn_seed", "standardisation", "training_sequences", "window_mean",
 ]
 
 #: The ten indicators, in the paper's order (column order of every array here).
 INDICATORS: list[str] = list(INDICATOR_NAMES)
+
+#: Fewest healthy flights (overall and per indicator) :func:`standardisation` fits from: a mean and a
+#: sample standard deviation (ddof=1) need 2; 3 keeps one degree of freedom beyond that.
+STANDARDISATION_MIN_FLIGHTS = 3
 
 
 class ModeSubset(Constraint):
@@ -208,6 +219,40 @@ def cross_fit_folds(n: int, cv: Any, rng: np.random.Generator,
     parts = np.array_split(rng.permutation(n), k)
     return [(np.sort(np.concatenate([p for j, p in enumerate(parts) if j != f])), np.sort(held))
             for f, held in enumerate(parts)]
+
+
+def standardisation(x: np.ndarray) -> HealthyModel:
+    """A healthy model used for its per-indicator mean and standard deviation only (Z-scores).
+
+    Parameters
+    ----------
+    x : numpy.ndarray of shape (n_flights, 10)
+        Healthy indicator matrix (NaN where missing), ``n_flights >=``
+        :data:`STANDARDISATION_MIN_FLIGHTS` with each indicator available that
+        often.
+
+    Returns
+    -------
+    fuelhm_bench.diagnosis.HealthyModel
+        Fitted with ``min_flights=STANDARDISATION_MIN_FLIGHTS``: ``mean_``,
+        ``std_`` and ``zscores`` are those of the usual model; its correlation
+        (Ledoit-Wolf shrunk) is not meant to be used for Mahalanobis distances
+        when there are fewer than ``n_features + 1`` flights.
+
+    Raises
+    ------
+    fuelhm_bench.errors.DataFormatError
+        Fewer flights than :data:`STANDARDISATION_MIN_FLIGHTS` (overall or for
+        one indicator).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> model = standardisation(rng.normal(size=(5, 10)))
+    >>> model.zscores(np.zeros((1, 10))).shape
+    (1, 10)
+    """
+    return HealthyModel(min_flights=STANDARDISATION_MIN_FLIGHTS).fit(x)
 
 
 def sklearn_seed(rng: np.random.Generator) -> int:

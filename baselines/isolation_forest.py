@@ -18,7 +18,8 @@ from fuelhm_bench.methods import BaseMethod, Decision, Knowledge
 from fuelhm_bench.methods.params import Interval, Options, RandomState
 
 from baselines._common import (ModeSubset, collinearity_guilt_7, cross_fit_folds,
-                               indicator_values, reference_signatures, row_values, sklearn_seed)
+                               indicator_values, reference_signatures, row_values, sklearn_seed,
+                               standardisation)
 
 __all__ = ["IsolationForestMethod"]
 
@@ -27,7 +28,9 @@ class IsolationForestMethod(BaseMethod):
     """Isolation forest on healthy-standardised indicators; guilt by collinearity.
 
     **Features.** The indicators are standardised with the healthy mean and
-    standard deviation of the training flights (``HealthyModel``, eq. 7);
+    standard deviation of the training flights (``HealthyModel``, eq. 7;
+    only these are used, so the fit needs as few as 3 flights, not 11:
+    ``baselines._common.standardisation``);
     a missing indicator (NaN, or ``<name>_valid`` False) is imputed by its
     healthy mean, i.e. its Z-score is set to 0, in training and in ``decide``
     alike. Each flight is scored on its own (no per-unit history).
@@ -125,7 +128,7 @@ class IsolationForestMethod(BaseMethod):
         self.random_state = random_state
 
     def _fit_models(self, x: np.ndarray, seed: int) -> tuple[HealthyModel, IsolationForest]:
-        model = HealthyModel().fit(x)
+        model = standardisation(x)  # Z-scores only: fits from few flights (low_data)
         forest = IsolationForest(n_estimators=self.n_estimators, max_samples=self.max_samples,
                                  random_state=seed)
         forest.fit(_features(model, x))

@@ -24,7 +24,7 @@ from fuelhm_bench.methods.params import Interval, RandomState
 from fuelhm_bench.taxonomy import MODE_IDS
 
 from baselines._common import (ModeSubset, cross_fit_folds, indicator_values, itl_coefficients,
-                               row_values, sklearn_seed)
+                               row_values, sklearn_seed, standardisation)
 
 __all__ = ["ITLClassifierMethod"]
 
@@ -48,8 +48,10 @@ class ITLClassifierMethod(BaseMethod):
     coefficient counts as 0 (no known change); a missing indicator stays
     missing in its synthetic copies. The healthy class is the training
     flights themselves. Features are the Z-scores of the indicators (healthy
-    mean and standard deviation, ``HealthyModel``), missing ones imputed by
-    the healthy mean (Z = 0).
+    mean and standard deviation, ``HealthyModel``; only these are used, so
+    the fit needs as few as 3 flights, not 11:
+    ``baselines._common.standardisation``), missing ones imputed by the
+    healthy mean (Z = 0).
 
     **Score and alarm.** ``score = -log P(healthy | flight)`` (natural log,
     >= 0, finite: computed from the decision function with a log-sum-exp).
@@ -174,7 +176,7 @@ class ITLClassifierMethod(BaseMethod):
             positive, negative = 1 + 2 * k, 2 + 2 * k
             labels.append(np.where(sign > 0, positive, negative))
             label_modes[positive] = label_modes[negative] = MODE_IDS.index(mode)
-        model = HealthyModel().fit(x)
+        model = standardisation(x)  # Z-scores only: fits from few flights (low_data)
         clf = LogisticRegression(C=float(self.C), max_iter=2000, random_state=sklearn_seed(rng))
         # A small problem (10 features): BLAS threads only add synchronisation (the fit was
         # ~7x slower with them on a loaded 2-core machine); one thread also makes the result

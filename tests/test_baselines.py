@@ -37,7 +37,7 @@ from baselines.trivial import NullMethod, RandomMethod
 from fuelhm_bench.diagnosis import HealthyModel, fit_itl, signature_matrix
 from fuelhm_bench.diagnosis.synthetic import DEFAULT_STD, make_doe_table, make_healthy_table
 from fuelhm_bench.errors import MethodError, ParameterError
-from fuelhm_bench.methods import (BaseMethod, CheckData, Knowledge, check_method, make_check_data,
+from fuelhm_bench.methods import (BaseMethod, CheckData, Knowledge, check_method, make_check_data, run_table,
                                   parametrize_with_checks)
 from fuelhm_bench.methods import NullMethod as PackageNullMethod
 from fuelhm_bench.methods import RandomMethod as PackageRandomMethod
@@ -533,3 +533,43 @@ def test_leave_one_unit_out_accounts_for_unit_dispersion(world):
     by_unit = PaperMahalanobis(cv="units").fit(train, knowledge=k, random_state=0)
     by_flight = PaperMahalanobis(cv="loo").fit(train, knowledge=k, random_state=0)
     assert by_unit.threshold_ > by_flight.threshold_ + 0.3
+
+
+# ----------------------------------------------------------------------------- scarce healthy data
+def _low_data_fit_table(data: CheckData) -> pd.DataFrame:
+    """Healthy flights shaped like the shipped low_data scenario's fit part (its units minus the
+    calibration quarter, its flights per unit), drawn from the check data's healthy table."""
+    from fuelhm_bench.scenarios import load_scenario
+
+    training = load_scenario("low_data").training
+    n_fit_units = training.units - max(1, round(0.25 * training.units))
+    units = list(dict.fromkeys(data.healthy["unit_id"]))[:n_fit_units]
+    table = data.healthy[data.healthy["unit_id"].isin(units)]
+    table = table[table["flight_index"] < training.flights_per_unit].reset_index(drop=True)
+    # 5-fold cross-fitting leaves fewer flights per fold than a 10-indicator Mahalanobis model needs
+    assert len(table) == n_fit_units * training.flights_per_unit
+    assert len(table) - math.ceil(len(table) / 5) < len(IND) + 1
+    return table
+
+
+@pytest.mark.parametrize("make", [IsolationForestMethod, ITLClassifierMethod, PaperMahalanobis],
+                         ids=["isolation_forest", "itl_classifier", "paper"])
+def test_default_baselines_fit_on_the_low_data_training_set(make):
+    """Fewer healthy flights than a full 10-indicator Mahalanobis model needs (11), cross-fitted in
+    folds: the baselines fit with their default configuration and decide validly."""
+    data = make_check_data(0)
+    method = make(random_state=0).fit(_low_data_fit_table(data), knowledge=data.knowledge)
+    table = run_table(method, data.units)
+    assert np.isfinite(method.threshold_) and np.isfinite(table["score"]).all()
+    assert table["alarm"].any()  # the degrading units are still seen
+
+
+def test_standardisation_needs_three_flights():
+    from baselines._common import STANDARDISATION_MIN_FLIGHTS, standardisation
+    from fuelhm_bench.errors import DataFormatError
+
+    x = np.random.default_rng(0).normal(size=(STANDARDISATION_MIN_FLIGHTS, len(IND)))
+    model = standardisation(x)
+    np.testing.assert_allclose(model.zscores(x).mean(axis=0), 0.0, atol=1e-12)
+    with pytest.raises(DataFormatError, match="at least 3 healthy flights"):
+        standardisation(x[:2])
