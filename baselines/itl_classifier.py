@@ -87,7 +87,7 @@ class ITLClassifierMethod(BaseMethod):
         calibrates in-sample (threshold too permissive toward healthy).
     symmetric_modes : tuple of str, default=("null_bias_drift",)
         Modes simulated with both signs of the ITL (see above; the null-bias
-        drift may go either way, PHYSICS.md section 4).
+        drift may go either way, docs/physics.md §6 Degradation modes).
     random_state : int, numpy.random.Generator or None, default=None
         Seed of the synthetic flights, of the folds and of the classifier
         (integer seeds drawn from ``rng_``).

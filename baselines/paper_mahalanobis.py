@@ -105,7 +105,7 @@ class PaperMahalanobis(BaseMethod):
         Source of the reference signatures for the diagnosis (see above).
     symmetric_modes : tuple of str, default=("null_bias_drift",)
         Modes whose signature may appear with either sign. The null-bias
-        drift moves the whole curve left *or* right (PHYSICS.md section 4:
+        drift moves the whole curve left *or* right (docs/physics.md §6 Degradation modes:
         ``ΔI_nb 0 → ±20 % I_r``), so a negative drift must still point at it.
         ``()`` gives the plain signed collinearity.
     random_state : int, numpy.random.Generator or None, default=None

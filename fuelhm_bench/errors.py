@@ -25,7 +25,7 @@ class UnknownNameError(FuelHMError, KeyError):
 
 
 class DataFormatError(FuelHMError, ValueError):
-    """A flight file or table does not follow the DATA.md format."""
+    """A flight file or table does not follow the flight format of docs/data-format.md."""
 
 
 class ScenarioError(FuelHMError, ValueError):

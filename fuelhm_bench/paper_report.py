@@ -133,10 +133,10 @@ def render_report(r: PaperResult) -> str:
         "## Where and why the numbers differ from the paper",
         "",
         "* **Model.** The paper's Simulink model and its recalibration on Snecma fleet data are not public; our "
-        "model uses the PHYSICS.md parameter set. Z-scores depend on the healthy spread of each indicator, which "
+        "model uses the parameter set of docs/physics.md (§3 Nominal parameters). Z-scores depend on the healthy spread of each indicator, which "
         "here comes from simulated manufacturing dispersion, operating variability and sensor noise, not from "
         "fleet data, so magnitudes differ even where the pattern agrees.",
-        "* **Drift magnitude.** Our maximum drift is 20 % of the rated current (PHYSICS.md section 4); the "
+        "* **Drift magnitude.** Our maximum drift is 20 % of the rated current (docs/physics.md §6 Degradation modes); the "
         "paper does not state its maximum. Z-scores scale with it.",
         "* **Leakage signature.** In our model the seal leakage Q = K (p1 - p2) adds a chamber-to-chamber flow that "
         "the loop compensates at idle, so I0 moves strongly; the paper's leak signature is dominated by Y2. The "

@@ -29,7 +29,7 @@ INDICATOR_UNITS: dict[str, str] = {
     "Hys0": "mA", "G_in": "mm/s/mA", "G_out": "mm/s/mA", "G_null": "mm/s/mA",
 }
 
-#: Optional physical effects a nominal model omits (PHYSICS.md section 7).
+#: Optional physical effects a nominal model omits (docs/physics.md §7 Optional effects).
 EFFECT_IDS: tuple[str, ...] = (
     "spool_overlap",
     "spool_flow_force",

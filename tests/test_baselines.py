@@ -170,8 +170,8 @@ def test_more_folds_than_flights_is_rejected():
 
 # ----------------------------------------------------------------------------- synthetic world
 #: Z-scores of the indicators at maximal intensity of each mode (null-bias drift and internal
-#: leakage from the paper's Table IV, the others after the expected signatures of PHYSICS.md
-#: section 4). The true ITL slopes are these times the healthy standard deviations.
+#: leakage from the paper's Table IV, the others after the expected signatures of docs/physics.md
+#: §6 Degradation modes). The true ITL slopes are these times the healthy standard deviations.
 SIGNATURE_Z = {
     "filter_contamination": {"Y1": 6, "Y2": -6, "G_in": -8, "G_out": -8, "G_null": -6},
     "null_bias_drift": {"X1": 24, "X2": 26, "Inb": 28, "I0": 24},

@@ -1,4 +1,4 @@
-"""CLI: simulate, sweep, plot-curve (files in the DATA.md format, labels, errors, determinism)."""
+"""CLI: simulate, sweep, plot-curve (files in the format of docs/data-format.md, labels, errors, determinism)."""
 
 from __future__ import annotations
 

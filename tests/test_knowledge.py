@@ -29,7 +29,7 @@ def test_doe_pairs_every_case_per_unit(doe_table):
 
 
 def test_null_bias_drift_signature_pattern(doe_table):
-    """PHYSICS.md section 4: null-bias drift moves X1, X2, Inb, I0 together by ~ +1.6 mA at f = 1."""
+    """docs/physics.md §6 Degradation modes: null-bias drift moves X1, X2, Inb, I0 together by ~ +1.6 mA at f = 1."""
     from fuelhm_bench.diagnosis.itl import fit_itl
 
     a = fit_itl(doe_table).matrix("A")
@@ -51,7 +51,7 @@ def test_leakage_and_clogging_move_idle_current_oppositely(doe_table):
 
 
 def test_filter_contamination_scales_the_gains_down(doe_table):
-    """PHYSICS.md section 4: gains and Y1, Y2 scale down. (In flight data X1 also moves inward by
+    """docs/physics.md §6 Degradation modes: gains and Y1, Y2 scale down. (In flight data X1 also moves inward by
     ~0.4 mA at half intensity, and at full intensity the null gain is so low that the extractor flags
     the curve indicators; the law is fitted on the valid flights.)"""
     from fuelhm_bench.diagnosis.itl import fit_itl
@@ -70,7 +70,7 @@ def test_indicators_command_on_simulated_and_hand_made_csv(tmp_path, capsys):
     table = pd.read_csv(out)
     assert list(table["flight_id"]) == [0, 1] and "unit_id" in table
     assert table[list(INDICATOR_NAMES)].notna().all().all()
-    # A hand-made CSV in the DATA.md format (no unit_id, string flight ids) with one bad flight.
+    # A hand-made CSV in the format of docs/data-format.md (no unit_id, string flight ids) with one bad flight.
     f = pd.read_parquet(flights)
     hand = f[f.flight_id == 0][["time_s", "current_mA", "position_mm"]].copy()
     hand.insert(0, "flight_id", "A")

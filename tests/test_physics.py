@@ -62,7 +62,7 @@ def test_healthy_curve_shape(healthy):
 
 
 EXPECTED = {
-    # mode: (feature, direction) - PHYSICS.md section 4.
+    # mode: (feature, direction) - docs/physics.md §6 Degradation modes.
     "filter_contamination": [("g_out", -1), ("v_max", -1)],
     "null_bias_drift": [("I0", +1)],
     "backlash": [("hys", +1)],

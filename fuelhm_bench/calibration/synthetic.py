@@ -103,7 +103,7 @@ def hidden_effect_flights(effect: str | None, *, parameters: dict | None = None,
     Returns
     -------
     frame : pandas.DataFrame
-        Flights in the DATA.md format (mA, mm, with ``unit_id``, ``n2_pct``, ``phase``, ...).
+        Flights in the format of docs/data-format.md (mA, mm, with ``unit_id``, ``n2_pct``, ``phase``, ...).
     case : HiddenEffectCase
         Ground truth.
     """

@@ -19,7 +19,7 @@ def register(sub) -> None:
                     "written model holds the fleet mean (YAML, loadable by 'simulate --model'). Prints the gap "
                     "(RMS residual over the velocity-gain curve) before and after, the fitted values and their "
                     "identifiability.")
-    p.add_argument("flights", help="measured healthy flights (.parquet, .csv, .csv.gz; DATA.md format)")
+    p.add_argument("flights", help="measured healthy flights (.parquet, .csv, .csv.gz; format: docs/data-format.md)")
     p.add_argument("--out", required=True, help="output model file (YAML)")
     p.add_argument("--model", metavar="YAML", help="start model (default: nominal)")
     p.add_argument("--plot", metavar="FILE", help="write the curves before/after over the data (PNG, like Fig. 7)")

@@ -18,7 +18,7 @@ def register(sub) -> None:
                     "BIC and accept the best only if it also shrinks the gap on the held-out flights; the answer "
                     "is an effect id or 'none'. --out DIR writes a Markdown report with figures and the augmented "
                     "model (YAML, loadable by 'simulate --model'); --json prints one JSON object on stdout.")
-    p.add_argument("flights", help="measured healthy flights (.parquet, .csv, .csv.gz; DATA.md format)")
+    p.add_argument("flights", help="measured healthy flights (.parquet, .csv, .csv.gz; format: docs/data-format.md)")
     p.add_argument("--model", metavar="YAML", help="model to examine (default: nominal)")
     p.add_argument("--out", metavar="DIR", help="write report.md, figures, result.json and augmented_model.yaml here")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout (logs on stderr)")

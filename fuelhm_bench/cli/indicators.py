@@ -12,9 +12,9 @@ def register(sub) -> None:
     p = sub.add_parser("indicators", help="extract the 10 indicators of every flight (one row per flight)",
                        description="Extract the velocity-gain curve and the 10 indicators of the paper's Table I "
                                    "(X1, Y1, X2, Y2, Inb, I0, Hys0, G_in, G_out, G_null) from every flight of a "
-                                   "DATA.md file. Output: one row per flight with flight_id, unit_id (when "
+                                   "flight file (docs/data-format.md). Output: one row per flight with flight_id, unit_id (when "
                                    "present), the indicators, their validity flags and the reason of any NaN. "
-                                   "Flights that violate DATA.md are listed on stderr and kept as rows with "
+                                   "Flights that break its per-flight rules are listed on stderr and kept as rows with "
                                    "every indicator invalid.")
     p.add_argument("flights", help="flight file (.parquet, .csv, .csv.gz)")
     p.add_argument("--force", action="store_true", help="overwrite the output file")

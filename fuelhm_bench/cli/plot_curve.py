@@ -16,7 +16,7 @@ def register(sub) -> None:
                                    "local-mean smoothing (paper Fig. 4); --annotate marks the indicators "
                                    "(Fig. 5); --overlay adds curves from other files, e.g. under "
                                    "degradation (Fig. 8).")
-    p.add_argument("flights", help="flight file in the DATA.md format (.parquet, .csv, .csv.gz)")
+    p.add_argument("flights", help="flight file (.parquet, .csv, .csv.gz; format: docs/data-format.md)")
     p.add_argument("--flight", action="append", default=None, metavar="ID",
                    help="flight id to draw (repeatable; default: the first flight of the file)")
     p.add_argument("--annotate", action="store_true", help="mark the 10 indicators on the curve (Fig. 5)")

@@ -1,4 +1,4 @@
-"""``fuelhm-bench simulate``: simulate a fleet and write flights (DATA.md) plus a labels table."""
+"""``fuelhm-bench simulate``: simulate a fleet and write flights plus a labels table (docs/data-format.md)."""
 
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ def parse_degrade(spec: str) -> tuple[str, float]:
 
 
 def register(sub) -> None:
-    p = sub.add_parser("simulate", help="simulate a fleet of units over flights (DATA.md output + labels)",
+    p = sub.add_parser("simulate", help="simulate a fleet of units over flights (flight file + labels, docs/data-format.md)",
                        description="Simulate N units flying M flights each, with optional degradations and "
                                    "effects; writes the flight table and a labels table beside it "
                                    "(flights.parquet -> flights.labels.parquet).")

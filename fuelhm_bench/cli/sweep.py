@@ -12,7 +12,7 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="velocity-gain sweep of a model (paper section IV.B)",
                        description="Ramp the current slowly from the lower to the upper saturation and back, "
                                    "open loop, on a virtual bench without end stops, and write the result in the "
-                                   "DATA.md format (one flight; the rod position is the true one of the virtual "
+                                   "flight format of docs/data-format.md (one flight; the rod position is the true one of the virtual "
                                    "bench, and the true velocity is in an extra 'velocity_true_mm_s' column).")
     p.add_argument("--min-ma", type=float, default=-12.0, help="lowest current [mA] (default -12)")
     p.add_argument("--max-ma", type=float, default=12.0, help="highest current [mA] (default 12)")

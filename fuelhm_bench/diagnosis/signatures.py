@@ -222,7 +222,7 @@ def collinearity_guilt(signatures, references, *, symmetric=False):
     indicators in a signed direction (``dI = A * intensity`` with intensity
     >= 0), so a signature pointing *opposite* to ``r_m`` is evidence against
     ``m``, not for it. For a mode whose sign is not fixed (the null-bias drift
-    may go either way, PHYSICS.md section 4) list it in ``symmetric`` to use
+    may go either way, docs/physics.md §6 Degradation modes) list it in ``symmetric`` to use
     ``|cos|`` instead (equivalent to adding ``-r_m`` as a second reference and
     summing the two probabilities). Probabilities are ``c_m / sum(c)``; when
     every ``c_m`` is 0 (zero or all-NaN signature, or no positive collinearity)

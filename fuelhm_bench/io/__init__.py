@@ -1,6 +1,6 @@
 """Reading and writing benchmark data at the file boundary (units of the files: s, mA, mm).
 
-The flight format is DATA.md v1; see :mod:`fuelhm_bench.io.flights` for the
+The flight format is described in docs/data-format.md; see :mod:`fuelhm_bench.io.flights` for the
 file-level and per-flight rules, and :mod:`fuelhm_bench.io.tables` for the
 supported file formats and atomic writing.
 """

@@ -1,4 +1,4 @@
-"""Flight data I/O: the DATA.md v1 long format, per-flight checks, labels tables.
+"""Flight data I/O: the long flight format (docs/data-format.md), per-flight checks, labels tables.
 
 This module is the data boundary of fuelhm-bench. Columns keep the units of the
 file format -- seconds (``time_s``), milliamperes (``current_mA``), millimetres
@@ -125,9 +125,9 @@ __all__ = [
     "write_labels",
 ]
 
-#: Columns every flight table has (DATA.md v1).
+#: Columns every flight table has (docs/data-format.md section 2).
 REQUIRED_COLUMNS: tuple[str, ...] = ("flight_id", "time_s", "current_mA", "position_mm")
-#: Optional columns with a meaning in DATA.md v1; kept when present.
+#: Optional columns with a meaning in docs/data-format.md; kept when present.
 OPTIONAL_COLUMNS: tuple[str, ...] = ("unit_id", "demand_mm", "n2_pct", "fuel_temp_degC", "phase")
 #: Columns stored as float64, with their units.
 NUMERIC_COLUMNS: dict[str, str] = {
@@ -470,7 +470,7 @@ def _first_line(path: Path) -> int | None:
 
 
 def read_flights(path: str | os.PathLike[str]) -> pd.DataFrame:
-    """Read a flight file (Parquet, CSV or gzip CSV) in the DATA.md v1 format.
+    """Read a flight file (Parquet, CSV or gzip CSV) in the format of docs/data-format.md.
 
     Parameters
     ----------

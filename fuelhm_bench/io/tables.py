@@ -1,7 +1,7 @@
 """Format-agnostic table files: detection by suffix, safe reading, atomic writing.
 
 This module knows nothing about flights; :mod:`fuelhm_bench.io.flights` builds
-the DATA.md flight and labels formats on top of it.
+the flight and labels formats (docs/data-format.md) on top of it.
 
 Supported formats, chosen by the (case-insensitive) file-name suffix:
 

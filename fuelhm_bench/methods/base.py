@@ -161,7 +161,7 @@ class BaseMethod(abc.ABC):
             Published knowledge (ITL, signatures, maximal intensities).
         raw_flights : object, default=None
             Raw flight samples of the same healthy flights, for methods that
-            work on samples (DATA.md long format), or None.
+            work on samples (the long format of docs/data-format.md), or None.
         random_state : int, numpy.random.Generator or None, default=None
             Seed. When None, the ``random_state`` hyperparameter is used if the
             method has one; when both are None a fresh OS seed is drawn (the

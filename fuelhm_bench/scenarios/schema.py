@@ -324,7 +324,7 @@ class HiddenEffectSpec(Spec):
     Parameters
     ----------
     effect : str
-        Effect id (PHYSICS.md section 7).
+        Effect id (docs/physics.md §7 Optional effects).
     parameters : mapping of str to float, default={}
         Parameter overrides of the effect, SI units as in the parameter names
         (e.g. coulomb_n for rod_friction); omitted ones take the effect's defaults.
