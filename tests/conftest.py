@@ -4,27 +4,17 @@ from __future__ import annotations
 
 import pytest
 import yaml
+from sizes import tiny_scenario_data
 
 
 def _tiny_scenario(tmp_path, name="tiny", base="paper_2012"):
-    """A shipped scenario shrunk: 3 test units x 8 flights, 4 x 4 healthy training flights, 5-minute flights."""
+    """A shipped scenario file shrunk to the tiny sizes of ``sizes.py`` (written to ``tmp_path``)."""
     from fuelhm_bench.scenarios import shipped_scenario_files
 
     files = shipped_scenario_files()
     src = files[base] if isinstance(files, dict) else next(p for p in files if f"{base}.yaml" in str(p))
-    data = yaml.safe_load(open(src))
+    data = tiny_scenario_data(yaml.safe_load(open(src)))
     data["name"] = name
-    data["fleet"]["units"] = 3
-    data["fleet"]["flights_per_unit"] = 8
-    data["mission"]["duration_min"] = 5.0
-    data["training"]["units"] = 4
-    data["training"]["flights_per_unit"] = 4
-    for d in data["degradations"]:
-        d["onset_min"], d["onset_max"], d["ramp_flights"] = 1, 2, 3
-    if data.get("simultaneous") is False:
-        data["healthy_probability"] = 0.0
-        for d in data["degradations"]:
-            d["probability"] = 1.0 / len(data["degradations"])
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path

@@ -12,14 +12,15 @@ import pytest
 from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig
 from fuelhm_bench.calibration.study import cases_frame, run_study, summarize
 from fuelhm_bench.taxonomy import EFFECT_IDS
+from sizes import STUDY_FLIGHTS, STUDY_MINUTES, STUDY_UNITS
 
 CONFIG = DiscrepancyConfig(n_jobs=2)
 
 
 @pytest.mark.slow
 def test_identification_accuracy_and_false_discoveries(tmp_path):
-    cases = run_study(EFFECT_IDS + ("none",), seeds=range(300, 306), n_units=2, n_flights=3, minutes=4.0,
-                      config=CONFIG)
+    cases = run_study(EFFECT_IDS + ("none",), seeds=range(300, 306), n_units=STUDY_UNITS,
+                      n_flights=STUDY_FLIGHTS, minutes=STUDY_MINUTES, config=CONFIG)
     table = summarize(cases)
     cases_frame(cases).to_csv(tmp_path / "cases.csv", index=False)
     table.to_csv(tmp_path / "summary.csv", index=False)
@@ -35,8 +36,8 @@ def test_identification_accuracy_and_false_discoveries(tmp_path):
 @pytest.mark.slow
 def test_magnitude_scan_down_to_the_low_end_of_the_test_ranges(tmp_path):
     # Fractions of the test range on a log scale: 0 is its low end, 1 its high end.
-    cases = run_study(EFFECT_IDS, seeds=range(310, 313), fractions=[0.0, 0.5, 1.0], n_units=2, n_flights=3,
-                      minutes=4.0, config=CONFIG)
+    cases = run_study(EFFECT_IDS, seeds=range(310, 313), fractions=[0.0, 0.5, 1.0], n_units=STUDY_UNITS,
+                      n_flights=STUDY_FLIGHTS, minutes=STUDY_MINUTES, config=CONFIG)
     table = summarize(cases)
     cases_frame(cases).to_csv(tmp_path / "scan.csv", index=False)
     print("\n" + table.to_string())

@@ -28,13 +28,14 @@ from fuelhm_bench.envs.actuation_loop import INDICATOR_BOUNDS, ActuationLoopEnv
 from fuelhm_bench.envs.cache import (cache_key, clear_memory_cache, default_cache_dir, published_knowledge,
                                      surrogate_knowledge, training_indicators)
 from fuelhm_bench.errors import ParameterError, UnknownNameError
+from sizes import FLIGHT_MINUTES, TINY_FLIGHTS, TINY_UNITS, knowledge_size
 from fuelhm_bench.scenarios import CostSpec, DegradationSpec, list_scenarios, load_scenario
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 
 ENV_ID = "FuelHM/ActuationLoop-v0"
 ENV_IDS = sorted(i for i in gym.registry if i.startswith("FuelHM/"))
-MINUTES = 2.0
-SMALL = KnowledgeSize.small()
+MINUTES = FLIGHT_MINUTES
+SMALL = knowledge_size()
 NO_ALARM = {"alarm": 0, "guilt": np.zeros(7, dtype=np.float32)}
 ALARM = {"alarm": 1, "guilt": np.eye(7, dtype=np.float32)[1]}
 
@@ -67,7 +68,8 @@ def episode(env, actions=None, *, seed=None, options=None):
     raise AssertionError("the episode did not terminate")
 
 
-def small_scenario(base="paper_2012", *, units=3, flights=8, degradations=None, costs=None, **changes):
+def small_scenario(base="paper_2012", *, units=TINY_UNITS, flights=TINY_FLIGHTS, degradations=None, costs=None,
+                   **changes):
     """A shipped scenario shrunk (and optionally given other degradations / costs)."""
     sc = load_scenario(base)
     fields = {"fleet": dataclasses.replace(sc.fleet, units=units, flights_per_unit=flights), **changes}

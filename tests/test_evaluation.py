@@ -12,6 +12,7 @@ from fuelhm_bench.cli import main
 from fuelhm_bench.errors import MethodError
 from fuelhm_bench.evaluation import load_method, parse_params, run_method, scenario_data
 from fuelhm_bench.methods import BaseMethod, Decision
+from sizes import DOE_UNITS
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +20,7 @@ def tiny(tmp_path_factory):
     from conftest import _tiny_scenario
 
     path = _tiny_scenario(tmp_path_factory.mktemp("sc"))
-    data, _ = scenario_data(path, doe_units=1)
+    data, _ = scenario_data(path, doe_units=DOE_UNITS)
     return path, data
 
 

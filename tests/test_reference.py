@@ -37,8 +37,11 @@ def _demand() -> FlightInputs:
     return FlightInputs(d, np.full(d.size, 0.82), 0.01)
 
 
-@pytest.mark.parametrize("mode", [None] + [m for m in MODE_IDS if m != "backlash"])
+@pytest.mark.parametrize("mode", [None] + [pytest.param(m, marks=pytest.mark.slow) for m in MODE_IDS
+                                            if m != "backlash"])
 def test_fast_path_agrees_with_reference(mode):
+    """The healthy loop runs in the default test run; each degradation (several seconds of tight-tolerance
+    reference each) with ``-m slow``."""
     model = IDEAL if mode is None else IDEAL.degraded({mode: 1.0})
     inp = _demand()
     fast = simulate([model], [inp], [np.random.default_rng(0)])[0]
@@ -54,6 +57,7 @@ def _limit_cycle(out):
     return i.std(), np.ptp(x), np.mean(np.diff(crossings))
 
 
+@pytest.mark.slow
 def test_backlash_limit_cycle_agrees_with_reference():
     model = IDEAL.degraded({"backlash": 1.0})
     inp = FlightInputs(np.full(400, 0.03), np.full(400, 0.82), 0.01)
@@ -64,6 +68,7 @@ def test_backlash_limit_cycle_agrees_with_reference():
         assert a == pytest.approx(b, rel=0.05)
 
 
+@pytest.mark.slow
 def test_reference_is_converged():
     """Tightening the reference's own tolerances changes it by far less than the fast-path tolerance."""
     inp = FlightInputs(_demand().demand_m[:200], np.full(200, 0.82), 0.01)

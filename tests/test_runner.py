@@ -22,22 +22,11 @@ from fuelhm_bench.runner import (EnvOutcome, action_from_decision, evaluate, obs
 from fuelhm_bench.scenarios import load_scenario
 from fuelhm_bench.scoring import LABEL_COLUMNS
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+from sizes import DOE_UNITS, knowledge_size
+from sizes import tiny_scenario as tiny
 
-SIZE = KnowledgeSize(doe_units=1)  # scenario_data(doe_units=1) builds the same published knowledge
-
-
-def tiny(base="paper_2012", name="tiny", **changes):
-    sc = load_scenario(base)
-    degradations = tuple(dataclasses.replace(d, onset_min=1, onset_max=3, ramp_flights=3) for d in sc.degradations)
-    fields = dict(name=name, fleet=dataclasses.replace(sc.fleet, units=3, flights_per_unit=8),
-                  mission=dataclasses.replace(sc.mission, duration_min=2.0),
-                  training=dataclasses.replace(sc.training, units=4, flights_per_unit=4), degradations=degradations)
-    if not sc.simultaneous:
-        n = len(degradations)
-        fields.update(healthy_probability=0.0,
-                      degradations=tuple(dataclasses.replace(d, probability=1.0 / n) for d in degradations))
-    fields.update(changes)
-    return dataclasses.replace(sc, **fields)
+SIZE = KnowledgeSize(doe_units=DOE_UNITS)  # scenario_data(doe_units=DOE_UNITS) builds the same knowledge
+SMALL = knowledge_size()
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +36,7 @@ def cache_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def surrogate_eval(cache_dir):
-    return prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(), cache_dir=cache_dir)
+    return prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=SMALL, cache_dir=cache_dir)
 
 
 class IdleCurrent(BaseMethod):
@@ -83,7 +72,7 @@ def test_physics_runner_reproduces_the_evaluation_pipeline(cache_dir):
     from fuelhm_bench.evaluation import run_method, scenario_data
 
     sc = tiny()
-    data, knowledge = scenario_data(sc, doe_units=1)
+    data, knowledge = scenario_data(sc, doe_units=DOE_UNITS)
     evaluation = prepare_evaluation(sc, fidelity="physics", knowledge_size=SIZE, cache_dir=cache_dir)
     columns = list(evaluation.fit_indicators.columns)  # the observation's columns (no n_points, quality_reason)
     assert columns == ["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES,
@@ -194,7 +183,7 @@ def test_misbehaving_methods_are_reported_and_others_unaffected(surrogate_eval):
 
 
 def test_environment_failure_is_not_blamed_on_the_method(cache_dir):
-    evaluation = prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(),
+    evaluation = prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=SMALL,
                                     cache_dir=cache_dir)
 
     def broken(action):
@@ -213,7 +202,7 @@ def test_progress_counts_every_scored_flight(surrogate_eval):
 
 
 def test_one_call_evaluate_with_progress_bars(cache_dir, tmp_path):
-    outcome = evaluate(IdleCurrent(), tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(),
+    outcome = evaluate(IdleCurrent(), tiny(), fidelity="surrogate", knowledge_size=SMALL,
                        cache_dir=cache_dir, progress=True)
     assert outcome.ok and len(outcome.decisions) == 24
     assert set(outcome.kpis().index) >= {"summary_score", "cost_kusd"}
@@ -221,18 +210,18 @@ def test_one_call_evaluate_with_progress_bars(cache_dir, tmp_path):
 
 def test_drift_scenario_prepares_the_nominal_fleet(cache_dir):
     evaluation = prepare_evaluation(tiny("robustness_drift", name="drifty"), fidelity="surrogate",
-                                    knowledge_size=KnowledgeSize.small(), cache_dir=cache_dir)
+                                    knowledge_size=SMALL, cache_dir=cache_dir)
     nominal = evaluation.nominal
     assert nominal is not None and nominal.env.drifted is False and evaluation.env.drifted is True
     a, b = run_in_env(NullMethod(), evaluation), run_in_env(NullMethod(), nominal)
     pd.testing.assert_frame_equal(a.labels, b.labels)  # same fleet and faults, only the nominal model differs
-    assert prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(),
+    assert prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=SMALL,
                               cache_dir=cache_dir).nominal is None
 
 
 def test_seed_and_scale(cache_dir):
     evaluation = prepare_evaluation(tiny(), fidelity="surrogate", seed=5, scale=0.4,
-                                    knowledge_size=KnowledgeSize.small(), cache_dir=cache_dir)
+                                    knowledge_size=SMALL, cache_dir=cache_dir)
     assert evaluation.units == (0,) and evaluation.scenario.seeds.master == 5
     assert evaluation.n_flights == 8
 
@@ -245,7 +234,7 @@ def test_seed_and_scale(cache_dir):
 ])
 def test_bad_arguments(cache_dir, kwargs, match):
     with pytest.raises(ParameterError, match=match):
-        prepare_evaluation(tiny(), **{"knowledge_size": KnowledgeSize.small(), "cache_dir": cache_dir, **kwargs})
+        prepare_evaluation(tiny(), **{"knowledge_size": SMALL, "cache_dir": cache_dir, **kwargs})
 
 
 def test_bad_timeout(surrogate_eval):
@@ -287,7 +276,7 @@ def test_readme_example_runs_on_a_custom_scenario(tmp_path, monkeypatch, capsys)
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("FUELHM_BENCH_CACHE", str(tmp_path / "cache"))
     code = README_EXAMPLE.replace('fidelity="surrogate")', 'fidelity="surrogate", knowledge_size=SMALL)')
-    exec(compile(code, "README.md", "exec"), {"SMALL": KnowledgeSize.small(), "__name__": "readme"})
+    exec(compile(code, "README.md", "exec"), {"SMALL": SMALL, "__name__": "readme"})
     out = capsys.readouterr().out
     assert out.startswith("ok") and "cost_kusd" in out
     assert len(README_EXAMPLE.strip().splitlines()) <= 16
