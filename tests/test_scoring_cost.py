@@ -70,6 +70,9 @@ def test_worked_example_never_alarm_and_perfect_detector():
     # repaired after flight 2: the recorded alarms of flights 3-7 are replayed (healthy unit, no healthy alarms)
     assert (perfect["repairs"], perfect["failures"], perfect["replayed_flights"]) == (1, 0, 5)
     assert perfect["cost_kusd"] == 15.0
+    late = np.zeros(8, bool)
+    late[4:] = True  # detects two flights late: 2 undetected flights, then one repair
+    assert _cost(labels, _decisions(labels, late, np.zeros(8, int))).iloc[0]["cost_kusd"] == 2 * 2.0 + 15.0
 
 
 def test_a_false_alarm_costs_an_inspection():
