@@ -121,13 +121,12 @@ def maintenance_cost(run: Run, costs) -> pd.DataFrame:
     keys = ["unit_id", "flight_index"]
     decisions = labels[keys].merge(run.decisions, on=keys, how="left")
     p_fa = healthy_alarm_rate(run)
-    rows = []
-    for unit, idx in labels.groupby("unit_id", sort=False).indices.items():
-        inten = labels[list(INTENSITY_COLUMNS)].to_numpy(dtype=float)[idx]
-        mx = labels[list(MAX_INTENSITY_COLUMNS)].to_numpy(dtype=float)[idx]
-        alarm = decisions["alarm"].to_numpy(dtype=bool)[idx]
-        guilt = decisions[list(GUILT_COLUMNS)].to_numpy(dtype=float)[idx]
-        rows.append(_replay_unit(unit, inten, mx, alarm, guilt, c, p_fa))
+    inten = labels[list(INTENSITY_COLUMNS)].to_numpy(dtype=float)
+    mx = labels[list(MAX_INTENSITY_COLUMNS)].to_numpy(dtype=float)
+    alarm = decisions["alarm"].to_numpy(dtype=bool)
+    guilt = decisions[list(GUILT_COLUMNS)].to_numpy(dtype=float)
+    rows = [_replay_unit(unit, inten[idx], mx[idx], alarm[idx], guilt[idx], c, p_fa)
+            for unit, idx in labels.groupby("unit_id", sort=False).indices.items()]
     return pd.DataFrame(rows, columns=list(COST_COLUMNS))
 
 
