@@ -573,3 +573,18 @@ def test_standardisation_needs_three_flights():
     np.testing.assert_allclose(model.zscores(x).mean(axis=0), 0.0, atol=1e-12)
     with pytest.raises(DataFormatError, match="at least 3 healthy flights"):
         standardisation(x[:2])
+
+
+@pytest.mark.slow
+def test_every_baseline_runs_on_the_shipped_low_data_scenario(tmp_path):
+    """The shipped low_data scenario itself (its 3 x 6 training flights), surrogate fidelity, small scale."""
+    from fuelhm_bench.runner import prepare_evaluation, run_in_env
+    from sizes import knowledge_size
+
+    evaluation = prepare_evaluation("low_data", fidelity="surrogate", scale=0.2, knowledge_size=knowledge_size(),
+                                    cache_dir=tmp_path)
+    for method in (IsolationForestMethod(random_state=0), ITLClassifierMethod(random_state=0),
+                   PaperMahalanobis(), NullMethod(), RandomMethod(random_state=0)):
+        outcome = run_in_env(method, evaluation)
+        assert outcome.ok, (type(method).__name__, outcome.message)
+        assert np.isfinite(outcome.cost_kusd)
