@@ -7,6 +7,7 @@ repository.
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -27,12 +28,13 @@ _SKIP_DIRS = {".git", ".venv", "venv", "build", "dist", "__pycache__", ".pytest_
 
 def _project_files() -> list[Path]:
     files = []
-    for path in ROOT.rglob("*"):
-        rel = path.relative_to(ROOT)
-        if any(part in _SKIP_DIRS or part.endswith(".egg-info") for part in rel.parts[:-1]):
-            continue
-        if path.is_file() and (path.suffix in _TEXT_SUFFIXES or rel.as_posix() in {".ci/run", "README"}):
-            files.append(path)
+    for folder, dirs, names in os.walk(ROOT):
+        dirs[:] = [d for d in dirs if d not in _SKIP_DIRS and not d.endswith(".egg-info")]
+        for name in names:
+            path = Path(folder) / name
+            rel = path.relative_to(ROOT).as_posix()
+            if path.suffix in _TEXT_SUFFIXES or rel in {".ci/run", "README"}:
+                files.append(path)
     return files
 
 
