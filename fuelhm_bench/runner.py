@@ -282,8 +282,9 @@ class EnvOutcome:
     healthy_scores : ndarray or None
         The method's scores on the healthy calibration flights.
     episodes : DataFrame or None
-        Per unit: ``unit_id``, ``flights``, ``return_kusd`` (sum of rewards:
-        minus the cost of the decisions under the scenario's cost model),
+        Per unit: ``unit_id``, ``flights``, ``return_kusd`` (sum of the
+        environment's rewards, without maintenance: faults are not repaired by
+        alarms; the cost under the maintenance protocol is ``cost_kusd``),
         ``alarms``, ``false_alarms``, ``undetected_flights``, ``failures``.
     seconds : float
         Wall time (fit, calibration and episodes).
