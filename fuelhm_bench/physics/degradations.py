@@ -79,8 +79,9 @@ class DegradationLaw:
 
 
 LAWS: dict[str, DegradationLaw] = {law.mode: law for law in (
-    DegradationLaw("filter_contamination", "servovalve", "filter_flow_factor", "multiplicative", -0.7,
-                   "Inlet filter contamination: every valve flow and the pilot flow multiplied by 1 - 0.7 f."),
+    DegradationLaw("filter_contamination", "servovalve", "pilot_supply_fraction", "multiplicative", -0.75,
+                   "Inlet (pilot-stage) filter contamination: pilot supply pressure x (1 - 0.75 f), so the spool "
+                   "rate halves and the force against friction falls to 1/4 at f = 1; metering flows unchanged."),
     DegradationLaw("null_bias_drift", "servovalve", "null_bias_drift_a", "additive", 1.6e-3,
                    "Null-bias drift of the torque motor: + 1.6 mA (20 % of rated current) at f = 1."),
     DegradationLaw("backlash", "servovalve", "feedback_backlash_m", "additive", 30e-6,
@@ -88,12 +89,15 @@ LAWS: dict[str, DegradationLaw] = {law.mode: law for law in (
     DegradationLaw("spool_friction", "servovalve", "spool_friction_n", "additive", 9.0,
                    "Spool/sleeve friction: Coulomb force + 9 N at f = 1 (1 -> 10 N)."),
     DegradationLaw("radial_clearance", "servovalve", "corner_radius_m", "additive", 23e-6,
-                   "Abrasion of the spool-land corners: corner radius + 23 um at f = 1, so the leakage "
-                   "height grows 7 -> 30 um and the rounded edges open 23 um early (equivalent underlap)."),
-    DegradationLaw("internal_leakage", "cylinder", "leakage_coefficient_m3_s_pa", "additive", 1e-11,
-                   "Cylinder seal wear: laminar leakage coefficient + 1e-11 m^3/(s Pa) at f = 1."),
-    DegradationLaw("diaphragm_clogging", "cylinder", "diaphragm_open_fraction", "multiplicative", -1.0,
-                   "Coking of the cooling diaphragm: open fraction x (1 - f), fully clogged at f = 1."),
+                   "Erosion of the spool-land corners: corner radius + 23 um at f = 1, so the leakage "
+                   "height grows 7 -> 30 um and the rounded edges meter up to 23 um early near null "
+                   "(equivalent underlap), fading out over a few radii (full-stroke opening unchanged)."),
+    DegradationLaw("internal_leakage", "cylinder", "leakage_coefficient_m3_s_pa", "additive", 1e-12,
+                   "Cylinder seal wear: laminar leakage coefficient + 1e-12 m^3/(s Pa) at f = 1 (7 cm^3/s "
+                   "at 70 bar, as much as the cooling diaphragm passes: the rejection limit)."),
+    DegradationLaw("diaphragm_clogging", "cylinder", "diaphragm_open_fraction", "multiplicative", -0.75,
+                   "Coking of the cooling diaphragm: open fraction x (1 - 0.75 f); at f = 1 a quarter of the "
+                   "cooling flow is left (the rejection limit)."),
 )}
 assert tuple(LAWS) == MODE_IDS
 
@@ -150,7 +154,7 @@ def degrade(model, intensities: Mapping[str, float]):
         comp = changes.setdefault(law.component, {})
         current = comp.get(law.parameter, getattr(getattr(model, law.component), law.parameter))
         new = law.apply(current, f)
-        if law.parameter in ("filter_flow_factor",):
+        if law.parameter == "pilot_supply_fraction":
             new = max(new, 1e-3)
         if law.parameter == "diaphragm_open_fraction":
             new = min(max(new, 0.0), 1.0)
