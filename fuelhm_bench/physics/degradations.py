@@ -1,37 +1,46 @@
-"""The seven degradation modes of the paper's Table III.
+"""The seven degradation modes of the paper's Table III, as physical mechanisms.
 
 Each mode has a scalar intensity ``f`` in [0, 1] mapped to one physical
-parameter of the unit, relative to that unit's own healthy value (so the
-manufacturing dispersion is kept). Several modes can act at once.
+parameter of the element that degrades, relative to that unit's own healthy
+value (so the manufacturing dispersion is kept). Several modes can act at once.
+Mechanisms, sources and the criterion behind each maximum: docs/physics.md
+§6 Degradation modes.
 
-=========================  ==============================  ===============  ========================================
-mode                       parameter                       law              healthy -> f = 1
-=========================  ==============================  ===============  ========================================
-``filter_contamination``   ``filter_flow_factor``          multiplicative   x (1 - 0.7 f): 1 -> 0.3
-``null_bias_drift``        ``null_bias_drift_a``           additive         + 1.6 mA f (20 % of the 8 mA rated current)
-``backlash``               ``feedback_backlash_m``         additive         + 30 um f
-``spool_friction``         ``spool_friction_n``            additive         + 9 N f: 1 -> 10 N
-``radial_clearance``       ``corner_radius_m``             additive         + 23 um f: h_eff 7 -> 30 um, underlap 23 um
-``internal_leakage``       ``leakage_coefficient_m3_s_pa`` additive         + 1e-11 m^3/(s Pa) f
-``diaphragm_clogging``     ``diaphragm_open_fraction``     multiplicative   x (1 - f): 1 -> 0
-=========================  ==============================  ===============  ========================================
+=========================  ================================  ===============  ==========================================
+mode                       parameter                         law              healthy -> f = 1
+=========================  ================================  ===============  ==========================================
+``filter_contamination``   ``pilot_supply_fraction``         multiplicative   x (1 - 0.75 f): 1 -> 0.25 (spool rate / 2)
+``null_bias_drift``        ``null_bias_drift_a``             additive         + 1.6 mA f (20 % of the 8 mA rated current)
+``backlash``               ``feedback_backlash_m``           additive         + 30 um f
+``spool_friction``         ``spool_friction_n``              additive         + 9 N f: 1 -> 10 N
+``radial_clearance``       ``corner_radius_m``               additive         + 23 um f: h_eff 7 -> 30 um
+``internal_leakage``       ``leakage_coefficient_m3_s_pa``   additive         + 1e-12 m^3/(s Pa) f (7 cm^3/s at 70 bar)
+``diaphragm_clogging``     ``diaphragm_open_fraction``       multiplicative   x (1 - 0.75 f): 1 -> 0.25
+=========================  ================================  ===============  ==========================================
 
 Notes
 -----
+Filter contamination: the inlet filter feeds the pilot (first) stage only; its
+clogging lowers the pilot supply pressure, which slows the spool and weakens
+the force that moves it against friction, and leaves the metering flows alone.
+
 Radial clearance: the paper models it as a decrease of the restriction
-coefficient at the abraded corners of the spool lands. Abrasion rounds the
-corners: the rounded edge both leaks more (leakage height ``h = clearance +
-corner radius``) and starts metering before the geometric edge (effective lap
-``u = lap - corner radius``), which is the "equivalent underlap" of PHYSICS.md.
-Raising the leakage height alone barely changes the curve, because the
-softplus opening keeps the null flow gain constant.
+coefficient at the abraded corners of the spool lands. Erosion rounds the
+corners: the rounded edge leaks more (leakage height ``h = clearance + corner
+radius``) and starts metering before the geometric edge near null (an
+equivalent underlap that fades out a few radii from the edge, so the
+full-stroke opening and the saturation velocity are unchanged).
+
+Internal leakage and diaphragm clogging stop at a rejection limit: a seal that
+leaks as much as the cooling diaphragm passes (about 7 cm^3/s at 70 bar), and a
+cooling flow reduced to a quarter.
 
 The paper says the drift of the null bias is modelled by adding the opposite of
 the drift to the control current; adding ``dInb`` to the valve's null bias is
 the same equation (``i_eff = i - Inb0 - dInb``). Its sign is fixed positive here so
 that the transformation laws are linear in the intensity; a negative drift is the
 mirror image. The paper calls clogging "additive" on the restriction
-coefficient: with a unit healthy coefficient, ``1 - f`` is both.
+coefficient: with a unit healthy coefficient, ``1 - 0.75 f`` is both.
 """
 
 from __future__ import annotations
