@@ -5,7 +5,7 @@ position demand is the VSV schedule of that N2; nothing adds per-frame noise.
 The current's scatter at steady cruise then comes from the LVDT noise and ADC
 quantization through the controller and from the loop's own small-step motion
 (spool friction dead zone, integrator dead band): docs/physics.md §5 states
-0.018 mA about the 1-s moving mean (0.009-0.013 mA of it with an ideal sensor).
+0.020 mA about the 1-s moving mean (0.009-0.013 mA of it with an ideal sensor).
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def _cruise_scatter_ma(out, inp) -> float:
 
 
 def test_cruise_current_scatter_comes_from_sensor_and_loop(flights):
-    """Stated figure: about 0.018 mA at cruise; an ideal sensor removes part of it, not all."""
+    """Stated figure: about 0.020 mA at cruise; an ideal sensor removes part of it, not all."""
     ideal = LoopModel().with_parameters({"lvdt.noise_std_m": 0.0, "lvdt.adc_bits": 0})
     for inp in flights:
         real, perfect = simulate([LoopModel(), ideal], [inp, inp], [np.random.default_rng(1), np.random.default_rng(1)])
