@@ -53,8 +53,10 @@ def idle(n_flights: int = 6) -> None:
         vals = [extract_indicators(o.time_s, 1e3 * o.current_a, 1e3 * o.measured_position_m).values for o in outs]
         hys = np.array([v["Hys0"] for v in vals])
         inb = np.array([v["Inb"] for v in vals]) - 1e3 * model.servovalve.total_null_bias_a
-        print(f"{name:28s} Hys0 {hys.mean():.3f} +/- {hys.std():.3f} mA   extracted Inb - Inb0 {inb.mean():+.3f} "
-              f"+/- {inb.std():.3f} mA")
+        valid = np.isfinite(inb)
+        inb_text = (f"{inb[valid].mean():+.3f} +/- {inb[valid].std():.3f} mA" if valid.any() else "not identified")
+        print(f"{name:28s} Hys0 {hys.mean():.3f} +/- {hys.std():.3f} mA   extracted Inb - Inb0 {inb_text} "
+              f"({valid.sum()}/{valid.size} flights valid)")
 
 
 if __name__ == "__main__":

@@ -6,10 +6,13 @@ Per frame ``k`` (period T), for every flight of the batch (leading axis):
 2. controller (PI, clamp, saturation) -> commanded current ``i_k`` (or the
    open-loop current of a sweep);
 3. spool: exact piecewise motion over the frame with the command held
-   (:func:`~fuelhm_bench.physics.servovalve.spool_advance`), evaluated at the two
-   Gauss-Legendre points of the frame;
+   (:func:`~fuelhm_bench.physics.servovalve.spool_advance`) and the mechanical
+   stops (:func:`~fuelhm_bench.physics.servovalve.spool_stop`), evaluated at the
+   two Gauss-Legendre points of the frame;
 4. rod: ``x_{k+1} = clip(x_k + T * mean(v(gauss points)), 0, stroke)`` with the
-   quasi-static velocity ``v`` of :mod:`~fuelhm_bench.physics.cylinder`;
+   quasi-static velocity ``v`` of :mod:`~fuelhm_bench.physics.cylinder`; in a frame
+   where the spool reaches its stop (a kink of ``v(t)``) the quadrature is split at
+   that instant (found by bisection on the exact spool motion);
 5. LVDT filter: exact first-order-hold update of its states.
 
 Velocity evaluation has two modes. *Table* mode (default): at the start of a
