@@ -4,7 +4,9 @@
 
 Reports, in ``extra_info`` and on stdout:
 
-* ``real_time_factor``: simulated flight-seconds per wall-second on one core,
+* ``real_time_factor``: simulated flight-seconds per wall-second on one core
+  (and ``real_time_factor_cpu``, per CPU-second of this process, which a busy
+  shared machine disturbs less than the wall clock),
   for a batch of 8 one-hour flights of 8 manufactured units through
   :func:`fuelhm_bench.physics.simulate.simulate` (noise generation and packing
   included; velocity tables built in the warm-up round, as they are when units
@@ -37,12 +39,19 @@ def test_fast_path_real_time_factor(benchmark):
         return simulate(units, inputs, [np.random.default_rng(s) for s in range(n)])
 
     run()  # compile and build the velocity tables
+    cpu = []
+    for _ in range(5):
+        t0 = time.process_time()
+        run()
+        cpu.append(time.process_time() - t0)
     benchmark.pedantic(run, rounds=5, iterations=1)
     rtf = n * mission.duration_s / benchmark.stats.stats.min
     benchmark.extra_info["real_time_factor"] = rtf
+    benchmark.extra_info["real_time_factor_cpu"] = n * mission.duration_s / min(cpu)
     benchmark.extra_info["ms_per_flight_hour"] = 1e3 * benchmark.stats.stats.min / n
     print(f"\nfast path: {rtf:,.0f}x real time on one core "
-          f"({1e3 * benchmark.stats.stats.min / n:.1f} ms per one-hour flight)")
+          f"({1e3 * benchmark.stats.stats.min / n:.1f} ms per one-hour flight); "
+          f"{n * mission.duration_s / min(cpu):,.0f}x per CPU-second")
 
 
 @pytest.mark.benchmark(group="physics")

@@ -43,23 +43,24 @@ def test_leakage_and_clogging_move_idle_current_oppositely(doe_table):
     from fuelhm_bench.diagnosis.itl import fit_itl
 
     a = fit_itl(doe_table).matrix("A")
-    assert a.loc["internal_leakage", "I0"] < -0.3      # the valve must feed the leak: I0 moves away from Inb
+    # At the rejection limit (7 cm^3/s at 70 bar, docs/physics.md §6) the leak is small: I0 -0.12 mA.
+    assert a.loc["internal_leakage", "I0"] < -0.06     # the valve must feed the leak: I0 moves away from Inb
     assert a.loc["diaphragm_clogging", "I0"] > 0.1     # less cooling flow: |I0 - Inb| shrinks
     # The leak shifts the curve vertically near the slope changes (paper Table IV: Y1, Y2), not Inb.
-    assert abs(a.loc["internal_leakage", "Y1"]) > 2.0  # mm/s at full intensity
+    assert abs(a.loc["internal_leakage", "Y1"]) > 0.3  # mm/s at full intensity
     assert abs(a.loc["internal_leakage", "Inb"]) < 0.3
 
 
-def test_filter_contamination_scales_the_gains_down(doe_table):
-    """docs/physics.md §6 Degradation modes: gains and Y1, Y2 scale down. (In flight data X1 also moves inward by
-    ~0.4 mA at half intensity, and at full intensity the null gain is so low that the extractor flags
-    the curve indicators; the law is fitted on the valid flights.)"""
+def test_filter_contamination_widens_idle_hysteresis_not_the_gains(doe_table):
+    """docs/physics.md §6: the clogged inlet filter starves the pilot stage (slower spool, weaker against
+    friction): Hys0 rises; the static gains stay within a few % (release 0.1.0 scaled them by 0.3)."""
     from fuelhm_bench.diagnosis.itl import fit_itl
 
     a = fit_itl(doe_table).matrix("A")
     healthy = doe_table[doe_table["mode"] == "healthy"]
+    assert a.loc["filter_contamination", "Hys0"] > 1.5 * healthy["Hys0"].mean()
     for gain in ("G_in", "G_out", "G_null"):
-        assert a.loc["filter_contamination", gain] < -0.4 * healthy[gain].mean()  # >= 40 % lower at f = 1
+        assert abs(a.loc["filter_contamination", gain]) < 0.1 * healthy[gain].mean()
 
 
 def test_indicators_command_on_simulated_and_hand_made_csv(tmp_path, capsys):

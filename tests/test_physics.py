@@ -61,26 +61,57 @@ def test_healthy_curve_shape(healthy):
     assert f["hys"] > 0.02
 
 
-EXPECTED = {
-    # mode: (feature, direction) - docs/physics.md §6 Degradation modes.
-    "filter_contamination": [("g_out", -1), ("v_max", -1)],
-    "null_bias_drift": [("I0", +1)],
-    "backlash": [("hys", +1)],
-    "spool_friction": [("hys", +1)],
-    "radial_clearance": [("g_null", +1)],
-    "internal_leakage": [("v_at_0p5", +1), ("I0", -1)],
-    "diaphragm_clogging": [("I0", +1)],
+# mode: (features it moves, with direction), (features it must not change) - docs/physics.md §6 Degradation modes.
+# "Unchanged" means within 0.5 % (gains, saturation velocities) or 0.02 mA (I0, hysteresis).
+MECHANISMS = {
+    "filter_contamination": ([("hys", +1)], ["g_out", "g_in", "v_max", "v_min", "I0"]),
+    "null_bias_drift": ([("I0", +1)], ["hys", "g_in", "v_min"]),
+    "backlash": ([("hys", +1)], ["I0", "g_out", "g_in", "v_max", "v_min"]),
+    "spool_friction": ([("hys", +1)], ["I0", "g_out", "g_in", "v_max", "v_min"]),
+    "radial_clearance": ([("g_null", +1)], ["hys", "v_max", "v_min"]),
+    "internal_leakage": ([("I0", -1)], ["hys", "g_out", "g_in"]),
+    "diaphragm_clogging": ([("I0", +1)], ["hys", "g_out", "g_in"]),
 }
 
 
 @pytest.mark.parametrize("mode", MODE_IDS)
-def test_degradation_moves_curve_in_expected_direction(mode, healthy):
+def test_degradation_mechanism_direction_and_side_effects(mode, healthy):
     base = _curve_features(healthy)
     deg = _curve_features(run_sweep(NOMINAL.degraded({mode: 1.0})))
-    for feature, sign in EXPECTED[mode]:
+    moves, unchanged = MECHANISMS[mode]
+    for feature, sign in moves:
         change = deg[feature] - base[feature]
         scale = max(abs(base[feature]), 0.1)
         assert sign * change > 0.1 * scale, f"{mode}: {feature} {base[feature]:.3f} -> {deg[feature]:.3f}"
+    for feature in unchanged:
+        tol = 0.02 if feature in ("I0", "hys") else 0.005 * abs(base[feature])
+        assert abs(deg[feature] - base[feature]) <= tol, f"{mode} must not change {feature}: " \
+            f"{base[feature]:.3f} -> {deg[feature]:.3f}"
+
+
+def test_filter_contamination_slows_the_spool():
+    """The pilot stage starves: after a current step the rod accelerates more slowly (spool rate halved)."""
+    i = np.concatenate([np.zeros(20), np.full(20, 3e-3)])
+    inp = FlightInputs(np.zeros(40), np.full(40, 0.82), 0.01, open_loop_current_a=i, end_stops=False)
+    models = [NOMINAL, NOMINAL.degraded({"filter_contamination": 1.0})]
+    clean, dirty = simulate(models, [inp, inp], [np.random.default_rng(0), np.random.default_rng(0)])
+    transient = dirty.true_velocity_m_s[20] / clean.true_velocity_m_s[20]
+    steady = dirty.true_velocity_m_s[-1] / clean.true_velocity_m_s[-1]  # lower by the 4x friction dead zone only
+    assert transient < 0.85 * steady and steady > 0.85
+    assert NOMINAL.degraded({"filter_contamination": 1.0}).servovalve.spool_rate_per_s == pytest.approx(
+        0.5 * NOMINAL.servovalve.spool_rate_per_s)
+
+
+def test_leakage_at_full_intensity_is_the_rejection_limit_and_keeps_the_curve_monotone():
+    """7 cm^3/s at 70 bar (about the cooling diaphragm's flow); no negative-slope region near null."""
+    model = NOMINAL.degraded({"internal_leakage": 1.0})
+    assert model.cylinder.leakage_coefficient_m3_s_pa * 7e6 == pytest.approx(7e-6)
+    r = run_sweep(model)
+    sel = r.increasing & (np.abs(r.current_a - r.zero_crossing_a()) < 1.5e-3)
+    i, v = r.current_a[sel], r.velocity_m_s[sel]
+    order = np.argsort(i)
+    smooth = np.convolve(v[order], np.ones(15) / 15, "valid")
+    assert np.all(np.diff(smooth) > 0)
 
 
 def test_null_bias_drift_shifts_whole_curve(healthy):
@@ -104,10 +135,10 @@ def test_intensity_is_monotone_for_leakage(healthy):
 
 
 def test_several_modes_act_at_once(healthy):
-    both = run_sweep(NOMINAL.degraded({"null_bias_drift": 1.0, "filter_contamination": 1.0}))
+    both = run_sweep(NOMINAL.degraded({"null_bias_drift": 1.0, "spool_friction": 1.0}))
     f = _curve_features(both)
     assert f["I0"] > _curve_features(healthy)["I0"] + 0.5
-    assert f["v_max"] < 0.6 * _curve_features(healthy)["v_max"]
+    assert f["hys"] > _curve_features(healthy)["hys"] + 0.3
 
 
 def _short_flight(model, seed=0, minutes=3.0):
@@ -167,12 +198,25 @@ def test_fast_path_deterministic_and_batch_invariant():
 
 
 def test_table_mode_matches_direct_solver():
+    """Sample by sample while the loop is driven (engine-start sweep); in statistics once it sits still.
+
+    With no per-frame excitation the loop hunts slowly at constant demand (spool friction dead zone
+    and integrator dead band); the phase of that hunting is not reproducible to the last bit, so after
+    the sweep the two paths are compared by the level (1-s moving mean) and scatter of the signals.
+    """
     inp, _ = _short_flight(NOMINAL)
     m = NOMINAL.with_parameters({"lvdt.noise_std_m": 0.0, "lvdt.adc_bits": 0})
     a = simulate([m], [inp], [np.random.default_rng(0)], use_table=True)[0]
     b = simulate([m], [inp], [np.random.default_rng(0)], use_table=False)[0]
-    # Closed-loop trajectories differ by less than one 12-bit ADC quantum (17 um).
-    assert np.max(np.abs(a.true_position_m - b.true_position_m)) < NOMINAL.lvdt.range_max_m / 4096
+    quantum = (NOMINAL.lvdt.range_max_m - NOMINAL.lvdt.range_min_m) / 4096
+    n_start = int(60.0 / inp.frame_s)
+    assert np.max(np.abs(a.true_position_m[:n_start] - b.true_position_m[:n_start])) < quantum
+    w = np.ones(100) / 100
+    level = np.abs(np.convolve(a.true_position_m, w, "valid") - np.convolve(b.true_position_m, w, "valid"))
+    assert level.max() < 2 * quantum
+    scatter = [float((o.current_a[n_start:] - np.convolve(o.current_a[n_start:], w, "same"))[50:-50].std())
+               for o in (a, b)]
+    assert scatter[0] == pytest.approx(scatter[1], rel=0.05)
 
 
 def test_velocity_table_interpolation_error():

@@ -16,6 +16,10 @@ Tolerances (stated and justified):
 
 The fast path is validated with the sensor noise and ADC switched off so that a
 single quantization-threshold crossing cannot be mistaken for an integration error.
+The default run checks the healthy loop (its demand drives the spool onto its stops);
+every mode, the backlash limit cycle and the reference's own convergence run under
+``-m slow`` (a few seconds to a minute each). docs/physics.md §8 Numerics lists the
+measured errors.
 """
 
 from __future__ import annotations
@@ -37,8 +41,8 @@ def _demand() -> FlightInputs:
     return FlightInputs(d, np.full(d.size, 0.82), 0.01)
 
 
-@pytest.mark.parametrize("mode", [None] + [pytest.param(m, marks=pytest.mark.slow) for m in MODE_IDS
-                                            if m != "backlash"])
+@pytest.mark.parametrize("mode", [None] + [pytest.param(m, marks=pytest.mark.slow)
+                                           for m in MODE_IDS if m != "backlash"])
 def test_fast_path_agrees_with_reference(mode):
     """The healthy loop runs in the default test run; each degradation (several seconds of tight-tolerance
     reference each) with ``-m slow``."""

@@ -169,7 +169,7 @@ def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None) ->
 
 
 def flights_frame(flights: list[SimulatedFlight]) -> pd.DataFrame:
-    """Flight table in the DATA.md format (mA, mm at the boundary)."""
+    """Flight table in the docs/data-format.md format (mA, mm at the boundary)."""
     parts = []
     for fl in flights:
         out, ex = fl.output, fl.inputs.extras

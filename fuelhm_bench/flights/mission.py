@@ -4,11 +4,18 @@ A flight is: engine start (recording starts at ground idle; the FADEC then
 strokes the actuator end to end with demand ramps at increasing rates, the
 *test sweep*, the fastest ramp faster than the actuator can follow so that the
 current sweeps through the velocity saturation), taxi, take-off, climb, cruise,
-descent, approach, landing (with reverse thrust) and taxi-in. N2 follows each
-phase's set point through a first-order engine lag, with random throttle steps
-(operating variability). The variable-geometry demand is scheduled on N2
-(closed at low speed, open at high speed), so the actuator moves mostly in
-transients. The supply pressure follows N2 inside the physics (see
+descent, approach, landing (with reverse thrust) and taxi-in.
+
+Engine speed is the output of engine dynamics, never of per-frame noise. The
+*speed demand* is each phase's set point plus random throttle steps (operating
+variability) plus a slow band-limited fluctuation (a first-order Gauss-Markov
+process with correlation time ``n2_noise_time_constant_s``: gusts, fuel-control
+and bleed changes). The HP spool follows that demand through a first-order lag
+(``engine_time_constant_s``), so N2 is twice low-pass filtered and carries no
+power above a few tenths of a hertz (docs/physics.md §5 Mission and excitation).
+The variable-geometry demand is the VSV schedule of that N2 (closed at low
+speed, open at high speed), so the actuator moves mostly in transients. The
+supply pressure follows N2 inside the physics (see
 :class:`~fuelhm_bench.physics.fluid.FluidParams`). Fuel temperature drifts over
 the flight (recorded; the nominal model has no temperature effect).
 """
@@ -59,13 +66,16 @@ class MissionProfile:
     schedule_n2_low, schedule_n2_high : float, default=0.55, 1.0
         N2 range over which the demand moves from low to high [-].
     engine_time_constant_s : float, default=3.0
-        First-order lag of N2 towards the phase set point [s].
+        First-order lag of the HP spool speed N2 behind its demand [s].
     throttle_step_std : float, default=0.025
         Standard deviation of random throttle steps around the set point [-].
     throttle_step_interval_s : float, default=90.0
         Mean interval between throttle steps [s].
     n2_noise_std : float, default=0.002
-        Small per-frame N2 fluctuation [-].
+        Standard deviation of the slow band-limited fluctuation of the speed demand [-]
+        (stationary std of the Gauss-Markov process, before the engine lag).
+    n2_noise_time_constant_s : float, default=5.0
+        Correlation time of that fluctuation [s].
     fuel_temp_start_degc, fuel_temp_end_degc : float, default=15.0, 70.0
         Mean fuel temperature at start and end [degC] (each flight draws around them).
     """
@@ -83,6 +93,7 @@ class MissionProfile:
     throttle_step_std: float = 0.025
     throttle_step_interval_s: float = 90.0
     n2_noise_std: float = 0.002
+    n2_noise_time_constant_s: float = 5.0
     fuel_temp_start_degc: float = 15.0
     fuel_temp_end_degc: float = 70.0
 
@@ -99,6 +110,7 @@ class MissionProfile:
             "throttle_step_std": (0.0, 0.2, True),
             "throttle_step_interval_s": POSITIVE,
             "n2_noise_std": (0.0, 0.05, True),
+            "n2_noise_time_constant_s": (0.5, 600.0, True),
             "fuel_temp_start_degc": (-60.0, 150.0, True),
             "fuel_temp_end_degc": (-60.0, 150.0, True),
         })
@@ -180,12 +192,18 @@ class MissionProfile:
         # Reverse thrust burst at landing.
         land = bounds[PHASE_NAMES.index("landing") - 1]
         target[land + int(3 / T): land + int(15 / T)] = 0.85
-        # First-order engine lag (exact discrete update), then small fluctuations.
-        a = np.exp(-T / self.engine_time_constant_s)
+        # Slow band-limited fluctuation of the speed demand after the start: first-order
+        # Gauss-Markov process (exact discrete update, stationary std n2_noise_std).
         from scipy.signal import lfilter
 
-        n2 = lfilter([1 - a], [1, -a], target, zi=[a * target[0]])[0]
-        n2 = np.clip(n2 + rng.normal(0.0, self.n2_noise_std, n) * (t >= self.start_duration_s), 0.0, 1.15)
+        if self.n2_noise_std > 0.0 and n > n_start:
+            b = np.exp(-T / self.n2_noise_time_constant_s)
+            drive = rng.normal(0.0, self.n2_noise_std * np.sqrt(1.0 - b * b), n - n_start)
+            start = b * rng.normal(0.0, self.n2_noise_std)  # stationary initial state
+            target[n_start:] += lfilter([1.0], [1.0, -b], drive, zi=[start])[0]
+        # HP spool: first-order lag behind the speed demand (exact discrete update).
+        a = np.exp(-T / self.engine_time_constant_s)
+        n2 = np.clip(lfilter([1 - a], [1, -a], target, zi=[a * target[0]])[0], 0.0, 1.15)
         demand = self.demand_from_n2(n2)
         if self.test_sweep and n_start > 0:
             demand[:n_start] = self._test_sweep(n_start)

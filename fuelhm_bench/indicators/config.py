@@ -4,7 +4,7 @@ One frozen dataclass, :class:`ExtractionConfig`, holds every number the batch an
 streaming extractors use, so that both read the same definition and a configuration can be
 recorded next to the indicators it produced (provenance). All physical quantities carry their
 unit in the field name (currents in mA, positions in mm, velocities in mm/s, times in s): these
-are data-boundary units, the same as the flight files (DATA.md).
+are data-boundary units, the same as the flight files (docs/data-format.md).
 """
 
 from __future__ import annotations

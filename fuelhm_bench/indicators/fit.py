@@ -2,7 +2,7 @@
 
 Model
 -----
-The healthy velocity-gain curve (PHYSICS.md, paper Fig. 3/5) is modelled as a continuous
+The healthy velocity-gain curve (docs/physics.md §6 Degradation modes, paper Fig. 3/5) is modelled as a continuous
 piecewise-linear function of the current ``i`` (mA) with four breakpoints
 ``S_in < X1 < X2 < S_out`` and five segments::
 

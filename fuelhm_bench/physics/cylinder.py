@@ -26,7 +26,7 @@ import numba
 from fuelhm_bench.errors import range_error
 from fuelhm_bench.physics._validation import NON_NEGATIVE, POSITIVE, UNIT_INTERVAL, check_fields
 from fuelhm_bench.physics.fluid import orifice_flow
-from fuelhm_bench.physics.servovalve import effective_opening, slot_area
+from fuelhm_bench.physics.servovalve import effective_opening, rounded_opening, slot_area
 
 
 @dataclass(frozen=True)
@@ -110,25 +110,34 @@ class LoadParams:
 # Layout of the valve/cylinder coefficient vector used by the numba kernels.
 # (Indices are internal; build the vector with physics.kernel.pack_model.)
 C_W_NULL, C_W_OUT, C_O_A, C_O_B, C_H, C_LAP, C_CDV, C_ALPHA = 0, 1, 2, 3, 4, 5, 6, 7
-C_A1, C_A2, C_CQC, C_KLI, C_PR, C_PCR, C_N = 8, 9, 10, 11, 12, 13, 14
+C_A1, C_A2, C_CQC, C_KLI, C_PR, C_PCR = 8, 9, 10, 11, 12, 13
+C_RC = 14  # corner radius of the spool lands [m]
+C_N = 15
 
 
 @numba.njit(cache=True)
 def metering_coefficients(x_s: float, c) -> tuple[float, float, float, float, float, float, float, float]:
-    """Flow coefficients ``alpha_f*Cd*A*sqrt(2/rho)`` of the four edges and their x_s-derivatives.
+    """Flow coefficients ``alpha*Cd*A*sqrt(2/rho)`` of the four edges and their x_s-derivatives.
+
+    ``alpha`` (``c[C_ALPHA]``) is a main-stage flow factor, 1 in every model here: the
+    inlet filter feeds only the pilot stage. The derivatives neglect the slope of the
+    corner-rounding advance (the quasi-static solver does not use them).
 
     Returns (k_pa, k_at, k_pb, k_bt, dk_pa, dk_at, dk_pb, dk_bt).
     """
     h = c[C_H]
     lap = c[C_LAP]
     kc = c[C_CDV] * c[C_ALPHA]
-    o_pos = effective_opening(x_s - lap, h)
-    o_neg = effective_opening(-x_s - lap, h)
+    rc = c[C_RC]
+    r_pos = rounded_opening(x_s - lap, rc)
+    r_neg = rounded_opening(-x_s - lap, rc)
+    o_pos = effective_opening(r_pos, h)
+    o_neg = effective_opening(r_neg, h)
     a_pos, da_pos = slot_area(o_pos, c[C_W_NULL], c[C_W_OUT], c[C_O_A], c[C_O_B])
     a_neg, da_neg = slot_area(o_neg, c[C_W_NULL], c[C_W_OUT], c[C_O_A], c[C_O_B])
     # d o_eff / d o = logistic(o/h)
-    s_pos = 1.0 / (1.0 + math.exp(-(x_s - lap) / h))
-    s_neg = 1.0 / (1.0 + math.exp(-(-x_s - lap) / h))
+    s_pos = 1.0 / (1.0 + math.exp(-r_pos / h))
+    s_neg = 1.0 / (1.0 + math.exp(-r_neg / h))
     k_pos = kc * a_pos
     k_neg = kc * a_neg
     dk_pos = kc * da_pos * s_pos

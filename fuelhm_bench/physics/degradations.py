@@ -1,37 +1,46 @@
-"""The seven degradation modes of the paper's Table III.
+"""The seven degradation modes of the paper's Table III, as physical mechanisms.
 
 Each mode has a scalar intensity ``f`` in [0, 1] mapped to one physical
-parameter of the unit, relative to that unit's own healthy value (so the
-manufacturing dispersion is kept). Several modes can act at once.
+parameter of the element that degrades, relative to that unit's own healthy
+value (so the manufacturing dispersion is kept). Several modes can act at once.
+Mechanisms, sources and the criterion behind each maximum: docs/physics.md
+§6 Degradation modes.
 
-=========================  ==============================  ===============  ========================================
-mode                       parameter                       law              healthy -> f = 1
-=========================  ==============================  ===============  ========================================
-``filter_contamination``   ``filter_flow_factor``          multiplicative   x (1 - 0.7 f): 1 -> 0.3
-``null_bias_drift``        ``null_bias_drift_a``           additive         + 1.6 mA f (20 % of the 8 mA rated current)
-``backlash``               ``feedback_backlash_m``         additive         + 30 um f
-``spool_friction``         ``spool_friction_n``            additive         + 9 N f: 1 -> 10 N
-``radial_clearance``       ``corner_radius_m``             additive         + 23 um f: h_eff 7 -> 30 um, underlap 23 um
-``internal_leakage``       ``leakage_coefficient_m3_s_pa`` additive         + 1e-11 m^3/(s Pa) f
-``diaphragm_clogging``     ``diaphragm_open_fraction``     multiplicative   x (1 - f): 1 -> 0
-=========================  ==============================  ===============  ========================================
+=========================  ================================  ===============  ==========================================
+mode                       parameter                         law              healthy -> f = 1
+=========================  ================================  ===============  ==========================================
+``filter_contamination``   ``pilot_supply_fraction``         multiplicative   x (1 - 0.75 f): 1 -> 0.25 (spool rate / 2)
+``null_bias_drift``        ``null_bias_drift_a``             additive         + 1.6 mA f (20 % of the 8 mA rated current)
+``backlash``               ``feedback_backlash_m``           additive         + 30 um f
+``spool_friction``         ``spool_friction_n``              additive         + 9 N f: 1 -> 10 N
+``radial_clearance``       ``corner_radius_m``               additive         + 23 um f: h_eff 7 -> 30 um
+``internal_leakage``       ``leakage_coefficient_m3_s_pa``   additive         + 1e-12 m^3/(s Pa) f (7 cm^3/s at 70 bar)
+``diaphragm_clogging``     ``diaphragm_open_fraction``       multiplicative   x (1 - 0.75 f): 1 -> 0.25
+=========================  ================================  ===============  ==========================================
 
 Notes
 -----
+Filter contamination: the inlet filter feeds the pilot (first) stage only; its
+clogging lowers the pilot supply pressure, which slows the spool and weakens
+the force that moves it against friction, and leaves the metering flows alone.
+
 Radial clearance: the paper models it as a decrease of the restriction
-coefficient at the abraded corners of the spool lands. Abrasion rounds the
-corners: the rounded edge both leaks more (leakage height ``h = clearance +
-corner radius``) and starts metering before the geometric edge (effective lap
-``u = lap - corner radius``), which is the "equivalent underlap" of PHYSICS.md.
-Raising the leakage height alone barely changes the curve, because the
-softplus opening keeps the null flow gain constant.
+coefficient at the abraded corners of the spool lands. Erosion rounds the
+corners: the rounded edge leaks more (leakage height ``h = clearance + corner
+radius``) and starts metering before the geometric edge near null (an
+equivalent underlap that fades out a few radii from the edge, so the
+full-stroke opening and the saturation velocity are unchanged).
+
+Internal leakage and diaphragm clogging stop at a rejection limit: a seal that
+leaks as much as the cooling diaphragm passes (about 7 cm^3/s at 70 bar), and a
+cooling flow reduced to a quarter.
 
 The paper says the drift of the null bias is modelled by adding the opposite of
 the drift to the control current; adding ``dInb`` to the valve's null bias is
 the same equation (``i_eff = i - Inb0 - dInb``). Its sign is fixed positive here so
 that the transformation laws are linear in the intensity; a negative drift is the
 mirror image. The paper calls clogging "additive" on the restriction
-coefficient: with a unit healthy coefficient, ``1 - f`` is both.
+coefficient: with a unit healthy coefficient, ``1 - 0.75 f`` is both.
 """
 
 from __future__ import annotations
@@ -79,8 +88,9 @@ class DegradationLaw:
 
 
 LAWS: dict[str, DegradationLaw] = {law.mode: law for law in (
-    DegradationLaw("filter_contamination", "servovalve", "filter_flow_factor", "multiplicative", -0.7,
-                   "Inlet filter contamination: every valve flow and the pilot flow multiplied by 1 - 0.7 f."),
+    DegradationLaw("filter_contamination", "servovalve", "pilot_supply_fraction", "multiplicative", -0.75,
+                   "Inlet (pilot-stage) filter contamination: pilot supply pressure x (1 - 0.75 f), so the spool "
+                   "rate halves and the force against friction falls to 1/4 at f = 1; metering flows unchanged."),
     DegradationLaw("null_bias_drift", "servovalve", "null_bias_drift_a", "additive", 1.6e-3,
                    "Null-bias drift of the torque motor: + 1.6 mA (20 % of rated current) at f = 1."),
     DegradationLaw("backlash", "servovalve", "feedback_backlash_m", "additive", 30e-6,
@@ -88,12 +98,15 @@ LAWS: dict[str, DegradationLaw] = {law.mode: law for law in (
     DegradationLaw("spool_friction", "servovalve", "spool_friction_n", "additive", 9.0,
                    "Spool/sleeve friction: Coulomb force + 9 N at f = 1 (1 -> 10 N)."),
     DegradationLaw("radial_clearance", "servovalve", "corner_radius_m", "additive", 23e-6,
-                   "Abrasion of the spool-land corners: corner radius + 23 um at f = 1, so the leakage "
-                   "height grows 7 -> 30 um and the rounded edges open 23 um early (equivalent underlap)."),
-    DegradationLaw("internal_leakage", "cylinder", "leakage_coefficient_m3_s_pa", "additive", 1e-11,
-                   "Cylinder seal wear: laminar leakage coefficient + 1e-11 m^3/(s Pa) at f = 1."),
-    DegradationLaw("diaphragm_clogging", "cylinder", "diaphragm_open_fraction", "multiplicative", -1.0,
-                   "Coking of the cooling diaphragm: open fraction x (1 - f), fully clogged at f = 1."),
+                   "Erosion of the spool-land corners: corner radius + 23 um at f = 1, so the leakage "
+                   "height grows 7 -> 30 um and the rounded edges meter up to 23 um early near null "
+                   "(equivalent underlap), fading out over a few radii (full-stroke opening unchanged)."),
+    DegradationLaw("internal_leakage", "cylinder", "leakage_coefficient_m3_s_pa", "additive", 1e-12,
+                   "Cylinder seal wear: laminar leakage coefficient + 1e-12 m^3/(s Pa) at f = 1 (7 cm^3/s "
+                   "at 70 bar, as much as the cooling diaphragm passes: the rejection limit)."),
+    DegradationLaw("diaphragm_clogging", "cylinder", "diaphragm_open_fraction", "multiplicative", -0.75,
+                   "Coking of the cooling diaphragm: open fraction x (1 - 0.75 f); at f = 1 a quarter of the "
+                   "cooling flow is left (the rejection limit)."),
 )}
 assert tuple(LAWS) == MODE_IDS
 
@@ -150,7 +163,7 @@ def degrade(model, intensities: Mapping[str, float]):
         comp = changes.setdefault(law.component, {})
         current = comp.get(law.parameter, getattr(getattr(model, law.component), law.parameter))
         new = law.apply(current, f)
-        if law.parameter in ("filter_flow_factor",):
+        if law.parameter == "pilot_supply_fraction":
             new = max(new, 1e-3)
         if law.parameter == "diaphragm_open_fraction":
             new = min(max(new, 0.0), 1.0)

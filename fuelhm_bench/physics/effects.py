@@ -1,4 +1,4 @@
-"""Optional physical effects that a nominal model omits (PHYSICS.md section 7).
+"""Optional physical effects that a nominal model omits (docs/physics.md §7 Optional effects).
 
 Each effect is a frozen dataclass with its parameters (SI units in the names)
 and their allowed ranges, registered under a stable id. A model holds a tuple of

@@ -6,10 +6,13 @@ Per frame ``k`` (period T), for every flight of the batch (leading axis):
 2. controller (PI, clamp, saturation) -> commanded current ``i_k`` (or the
    open-loop current of a sweep);
 3. spool: exact piecewise motion over the frame with the command held
-   (:func:`~fuelhm_bench.physics.servovalve.spool_advance`), evaluated at the two
-   Gauss-Legendre points of the frame;
+   (:func:`~fuelhm_bench.physics.servovalve.spool_advance`) and the mechanical
+   stops (:func:`~fuelhm_bench.physics.servovalve.spool_stop`), evaluated at the
+   two Gauss-Legendre points of the frame;
 4. rod: ``x_{k+1} = clip(x_k + T * mean(v(gauss points)), 0, stroke)`` with the
-   quasi-static velocity ``v`` of :mod:`~fuelhm_bench.physics.cylinder`;
+   quasi-static velocity ``v`` of :mod:`~fuelhm_bench.physics.cylinder`; in a frame
+   where the spool reaches its stop (a kink of ``v(t)``) the quadrature is split at
+   that instant (found by bisection on the exact spool motion);
 5. LVDT filter: exact first-order-hold update of its states.
 
 Velocity evaluation has two modes. *Table* mode (default): at the start of a
@@ -31,7 +34,7 @@ import numpy as np
 from fuelhm_bench.physics import cylinder as cyl
 from fuelhm_bench.physics.cylinder import velocity_direct
 from fuelhm_bench.physics.lvdt import lvdt_discretization
-from fuelhm_bench.physics.servovalve import spool_advance
+from fuelhm_bench.physics.servovalve import spool_advance, spool_stop
 
 # Loop-vector layout.
 _K_NAMES = (
@@ -82,9 +85,9 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     c[cyl.C_O_B] = max(sv.transition_end * sv.spool_stroke_m, c[cyl.C_O_A] + 1e-9)
     c[cyl.C_H] = sv.leakage_height_m
     overlap = model.effect("spool_overlap")
-    c[cyl.C_LAP] = sv.effective_lap_m + (overlap.overlap_m if overlap else 0.0)
+    c[cyl.C_LAP] = sv.lap_m + (overlap.overlap_m if overlap else 0.0)
     c[cyl.C_CDV] = sv.discharge_coefficient * fl.flow_constant
-    c[cyl.C_ALPHA] = sv.filter_flow_factor
+    c[cyl.C_ALPHA] = 1.0  # the inlet filter feeds the pilot stage only
     c[cyl.C_A1] = cy.head_area_m2
     c[cyl.C_A2] = cy.rod_area_m2
     c[cyl.C_CQC] = (cy.diaphragm_open_fraction * cy.diaphragm_discharge_coefficient * cy.diaphragm_area_m2
@@ -92,6 +95,7 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     c[cyl.C_KLI] = cy.leakage_coefficient_m3_s_pa
     c[cyl.C_PR] = fl.return_pressure_pa
     c[cyl.C_PCR] = fl.regularisation_pressure_pa
+    c[cyl.C_RC] = sv.corner_radius_m
 
     k = np.zeros(K_N)
     k[K_FRAME] = ct.frame_s
@@ -105,9 +109,9 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     k[K_INB] = sv.total_null_bias_a
     k[K_KSV] = sv.spool_gain_m_per_a
     k[K_SSTROKE] = sv.spool_stroke_m
-    k[K_RATE] = sv.filter_flow_factor / sv.spool_time_constant_s
+    k[K_RATE] = sv.spool_rate_per_s
     k[K_HPLAY] = 0.5 * sv.feedback_backlash_m
-    k[K_FRICNUM] = sv.spool_friction_n * sv.pilot_error_span_m / sv.spool_end_area_m2
+    k[K_FRICNUM] = sv.spool_friction_n * sv.pilot_error_span_m / (sv.spool_end_area_m2 * sv.pilot_supply_fraction)
     ff = model.effect("spool_flow_force")
     k[K_FF] = ff.stiffness_ratio if ff else 0.0
     k[K_WNULL] = sv.slot_width_null_m
@@ -140,7 +144,11 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @numba.njit(cache=True)
 def spool_command(i_cmd: float, dps: float, k) -> float:
-    """Torque-motor spool command x_c [m] for a commanded current [A] (driver, null bias, flow force, stroke)."""
+    """Torque-motor spool command x_c [m] for a commanded current [A] (driver, null bias, flow force).
+
+    Not clipped: the spool's stops limit the spool itself (:func:`~fuelhm_bench.physics.servovalve.spool_stop`),
+    so friction and backlash do not reduce the full-stroke opening.
+    """
     i_coil = k[K_DGAIN] * i_cmd + k[K_DOFF]
     x_c = k[K_KSV] * (i_coil - k[K_INB])
     if k[K_FF] > 0.0:
@@ -152,11 +160,6 @@ def spool_command(i_cmd: float, dps: float, k) -> float:
         else:
             w = k[K_WNULL] + (k[K_WOUT] - k[K_WNULL]) * (ax - k[K_OA]) / (k[K_OB] - k[K_OA])
         x_c = x_c / (1.0 + k[K_FF] * (dps / 7e6) * (w / k[K_WNULL]))
-    smax = k[K_SSTROKE]
-    if x_c > smax:
-        x_c = smax
-    elif x_c < -smax:
-        x_c = -smax
     return x_c
 
 
@@ -324,9 +327,13 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
         x_c = spool_command(i, dps, k)
         dz = k[K_FRICNUM] / max(dps, 1e5)
         # 3. spool positions at the two Gauss-Legendre points of the frame and at its end
+        xs0, xfb0 = x_s, x_fb
         xa, fa = spool_advance(x_s, x_fb, x_c, t1, rate, hplay, dz, d1)
+        xa, fa = spool_stop(xa, fa, hplay, smax)
         xb, fb = spool_advance(xa, fa, x_c, t2 - t1, rate, hplay, dz, d2)
+        xb, fb = spool_stop(xb, fb, hplay, smax)
         x_s, x_fb = spool_advance(xb, fb, x_c, T - t2, rate, hplay, dz, d3)
+        x_s, x_fb = spool_stop(x_s, x_fb, hplay, smax)
         # 4. rod: mean velocity over the frame by Gauss-Legendre quadrature
         if use_table and n2 >= n2_lo and n2 <= n2_hi:
             w = (n2 - n2_lo) * inv_n2_step
@@ -337,7 +344,31 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
         else:
             va, p1 = _velocity(xa, n2, x, p1, c, k, table, False, n2_lo, n2_step, n2_hi)
             vb, p1 = _velocity(xb, n2, x, p1, c, k, table, False, n2_lo, n2_step, n2_hi)
-        x_new = x + 0.5 * T * (va + vb)
+        v_mean = 0.5 * (va + vb)
+        if abs(x_s) >= smax and abs(xs0) < smax:
+            # The spool reached its stop inside the frame: the velocity has a kink there, so
+            # integrate the moving part and the part on the stop separately (rare frames).
+            t_lo, t_hi = 0.0, T
+            for _ in range(40):
+                t_mid = 0.5 * (t_lo + t_hi)
+                xm, _fm = spool_advance(xs0, xfb0, x_c, t_mid, rate, hplay, dz)
+                if abs(xm) >= smax:
+                    t_hi = t_mid
+                else:
+                    t_lo = t_mid
+            t_hit = t_hi
+            xa2, _fa = spool_advance(xs0, xfb0, x_c, t_hit * GAUSS_LO, rate, hplay, dz)
+            xb2, _fb = spool_advance(xs0, xfb0, x_c, t_hit * GAUSS_HI, rate, hplay, dz)
+            if use_table and n2 >= n2_lo and n2 <= n2_hi:
+                va = _table_lookup(table, xa2, j, fw, n2, smax, x_scale)
+                vb = _table_lookup(table, xb2, j, fw, n2, smax, x_scale)
+                vs = _table_lookup(table, x_s, j, fw, n2, smax, x_scale)
+            else:
+                va, p1 = _velocity(xa2, n2, x, p1, c, k, table, False, n2_lo, n2_step, n2_hi)
+                vb, p1 = _velocity(xb2, n2, x, p1, c, k, table, False, n2_lo, n2_step, n2_hi)
+                vs, p1 = _velocity(x_s, n2, x, p1, c, k, table, False, n2_lo, n2_step, n2_hi)
+            v_mean = (0.5 * t_hit * (va + vb) + (T - t_hit) * vs) / T
+        x_new = x + T * v_mean
         if endstops:
             if x_new < 0.0:
                 x_new = 0.0

@@ -51,7 +51,7 @@ class LoopModel:
     ----------
     fluid, servovalve, cylinder, load, controller, driver, lvdt : parameter dataclasses
         Component parameters (SI units in the field names); defaults are the
-        nominal values of PHYSICS.md section 3.
+        nominal values of docs/physics.md §3 Nominal parameters.
     effects : tuple of effects, default=()
         Optional physical effects switched on (at most one of each id).
     """

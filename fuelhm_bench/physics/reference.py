@@ -2,7 +2,8 @@
 
 Between two controller frames the current is held (zero-order hold) and the
 continuous states ``[x_s, x_fb, x, y, y', y_lag]`` (spool, feedback point, rod,
-LVDT filter) are integrated with an implicit method (Radau by default) at tight
+LVDT filter) are integrated, segment by segment between the spool's mode changes
+(play taken up, spool on its stop, located by events), with an implicit method (Radau by default) at tight
 tolerances and a small maximum step. The right-hand side uses the same physics
 functions as the fast path (spool command, friction dead zone, play operator,
 quasi-static rod velocity from the direct solver, LVDT filter matrices), but
@@ -64,6 +65,7 @@ def simulate_reference(model, inputs: FlightInputs, rng: np.random.Generator, *,
     rmin, rmax = model.lvdt.range_min_m, model.lvdt.range_max_m
     top = math.floor((rmax - rmin) / q) - 1.0 if q > 0 else 0.0
     rate, half_play = k[kernel.K_RATE], k[kernel.K_HPLAY]
+    spool_stroke = k[kernel.K_SSTROKE]
     state = {"p1": float("nan")}
 
     x0 = float(inputs.demand_m[0]) if end_stops else 0.0
@@ -93,25 +95,20 @@ def simulate_reference(model, inputs: FlightInputs, rng: np.random.Generator, *,
         dz = k[kernel.K_FRICNUM] / max(dps, 1e5)
         f_aero = k[kernel.K_FAERO100] * n2 * n2
 
-        # Spool mode over this frame (x_c held): stuck, free travel in the play, engaged.
+        # Spool mode over this frame (x_c held): stuck, free travel in the play, engaged, at its stop.
         e0 = x_c - s[1]
-        if abs(e0) <= dz:
-            mode = "stuck"
-        else:
-            sgn = 1.0 if e0 > 0.0 else -1.0
-            mode = "free" if sgn * (s[0] - s[1]) < half_play else "engaged"
+        sgn = 1.0 if e0 > 0.0 else -1.0
 
-        def rhs(_t, st, x_c=x_c, dz=dz, dps=dps, f_aero=f_aero, mode=mode, e0=e0):
+        def rhs(_t, st, x_c=x_c, dz=dz, dps=dps, f_aero=f_aero, mode="stuck", e0=e0, sgn=sgn):
             x_s, x_fb, x = st[0], st[1], st[2]
-            if mode == "stuck":
+            if mode in ("stuck", "stop"):
                 vs = 0.0
                 vfb = 0.0
             elif mode == "free":
-                vs = rate * (e0 - math.copysign(dz, e0))
+                vs = rate * (e0 - sgn * dz)
                 vfb = 0.0
             else:
-                sg = 1.0 if e0 > 0.0 else -1.0
-                vs = rate * (x_c + sg * (half_play - dz) - x_s)
+                vs = rate * (x_c + sgn * (half_play - dz) - x_s)
                 vfb = vs
             if dps <= 0.0:
                 v = 0.0
@@ -123,27 +120,51 @@ def simulate_reference(model, inputs: FlightInputs, rng: np.random.Generator, *,
             ds = a_mat @ st[3:] + b_vec * x
             return np.array([vs, vfb, v, ds[0], ds[1], ds[2]])
 
-        def hit_play(_t, st, e0=e0):
-            return math.copysign(1.0, e0) * (st[0] - st[1]) - half_play
+        def hit_play(_t, st, sgn=sgn):
+            return sgn * (st[0] - st[1]) - half_play
 
-        hit_play.terminal = True
-        hit_play.direction = 1.0
-        events = hit_play if mode == "free" else None
-        with np.errstate(over="ignore"):  # scipy's Jacobian step-factor growth may overflow harmlessly
-            sol = solve_ivp(rhs, (0.0, T), s, method=method, rtol=rtol, atol=atol, max_step=max_step, events=events)
-        if sol.success and sol.status == 1:  # play taken up: continue engaged
-            t_hit = float(sol.t[-1])
-            mid = sol.y[:, -1].copy()
-            mid[1] = mid[0] - math.copysign(half_play, e0)
+        def hit_stop(_t, st, sgn=sgn):
+            return sgn * st[0] - spool_stroke
 
-            def rhs2(tt, st):
-                return rhs(tt, st, mode="engaged")
+        hit_play.terminal = hit_stop.terminal = True
+        hit_play.direction = hit_stop.direction = 1.0
+        t0, cur, mode = 0.0, s, None
+        for _ in range(4):  # at most stuck | free -> engaged -> stop
+            if mode is not None:
+                pass  # set by the event that ended the previous segment
+            elif abs(e0) <= dz:
+                mode = "stuck"
+            elif sgn * cur[0] >= spool_stroke:
+                mode = "stop"
+            elif sgn * (cur[0] - cur[1]) < half_play:
+                mode = "free"
+            else:
+                mode = "engaged"
+            events = {"free": [hit_play, hit_stop], "engaged": [hit_stop]}.get(mode)
 
-            with np.errstate(over="ignore"):
-                sol = solve_ivp(rhs2, (t_hit, T), mid, method=method, rtol=rtol, atol=atol, max_step=max_step)
-        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
+            def rhs_mode(tt, st, mode=mode):
+                return rhs(tt, st, mode=mode)
+
+            with np.errstate(over="ignore"):  # scipy's Jacobian step-factor growth may overflow harmlessly
+                sol = solve_ivp(rhs_mode, (t0, T), cur, method=method, rtol=rtol, atol=atol, max_step=max_step,
+                                events=events)
+            if not (sol.success and sol.status == 1):
+                cur = sol.y[:, -1].copy()
+                break
+            t0 = float(sol.t[-1])
+            cur = sol.y[:, -1].copy()
+            if sol.t_events[0].size and mode == "free":  # play taken up: engaged from here
+                cur[1] = cur[0] - sgn * half_play
+                mode = "engaged"
+            else:  # spool on its stop
+                cur[0] = sgn * spool_stroke
+                cur[1] = min(max(cur[1], cur[0] - half_play), cur[0] + half_play)
+                mode = "stop"
+            if t0 >= T:
+                break
+        if not sol.success or not np.all(np.isfinite(cur)):
             raise NumericalError(f"Reference solver failed at frame {t} (t = {t * T:.3f} s): {sol.message}")
-        new = sol.y[:, -1].copy()
+        new = cur.copy()
         if end_stops:
             new[2] = min(max(new[2], 0.0), stroke)
         out_i[t] = i

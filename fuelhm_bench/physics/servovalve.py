@@ -5,26 +5,37 @@ flow source on the spool, giving a first-order spool::
 
     x_c   = K_sv * (i_coil - Inb0 - dInb)                 torque-motor command [m]
     e     = x_c - x_fb                                     feedback-spring error [m]
-    dx_s/dt = (alpha_f / tau_s) * dz(e, d_f)               spool velocity [m/s]
+    dx_s/dt = (sqrt(beta_p) / tau_s) * dz(e, d_f)          spool velocity [m/s], |x_s| <= stroke
 
 ``x_fb`` is the feedback-spring attachment point. It follows the spool through a
 play operator of width ``b`` (backlash): it moves only when ``|x_s - x_fb|``
 reaches ``b/2``. ``dz`` is a dead zone of half-width ``d_f = F_c / k_d`` that
 models Coulomb friction between spool and sleeve: the spool sticks while the
 hydraulic drive force ``k_d * |e|`` is below the friction force ``F_c``; the drive
-stiffness ``k_d = A_end * dp_s / e_span`` scales with supply pressure, so
-friction matters most at low pressure. ``alpha_f`` is the inlet-filter flow
-factor (1 clean, < 1 contaminated): it slows the pilot flow and scales every
-metering flow. The command is clipped to the spool stroke. Inside one frame the
-command is constant and the motion is piecewise exact (constant-rate free travel
-in the play, then an exponential once engaged), see :func:`spool_advance`.
+stiffness ``k_d = beta_p * A_end * dp_s / e_span`` scales with the pilot supply
+pressure, so friction matters most at low pressure. ``beta_p`` is the pilot
+supply fraction: the first (pilot) stage is fed through the inlet filter, and a
+contaminated filter drops part of the supply pressure, so the pilot stage sees
+``beta_p * dp_s`` (1 clean). The nozzle flows that move the spool scale with the
+square root of that pressure (spool rate ``sqrt(beta_p) / tau_s``) and the force
+available against friction with the pressure itself; the main stage is fed from
+the supply port directly, so the metering flows do not pass the filter. The
+torque-motor command is not clipped: the spool is stopped by its mechanical
+stops at ``+/- stroke`` (:func:`spool_stop`). Inside one frame the command is
+constant and the motion is piecewise exact (constant-rate free travel in the
+play, then an exponential once engaged), see :func:`spool_advance`; the motion
+within an interval is monotone, so applying the stops at its end is exact.
+See docs/physics.md §2 Components and §6 Degradation modes.
 
-Second stage. Four metering edges P->A, A->T, P->B, B->T with openings
-``o = +/-x_s - u`` (lap ``u``, nominal 0). Radial clearance and corner rounding
-``h = clearance + corner radius`` make every edge leak near null, and a rounded
-corner starts metering early, so the effective lap is ``u - corner radius`` through an
-effective opening ``o_eff = h * softplus(o / h)`` (0.69 h at null; the slopes of
-the opening and closing edge sum to one, so the null gain stays finite). The
+Second stage. Four metering edges P->A, A->T, P->B, B->T with geometric openings
+``o = +/-x_s - u`` (lap ``u``, nominal 0). A rounded land corner (radius ``r``)
+starts metering before the geometric edge; far from the edge the flow area is
+set by the distance between the port edge and the land, which the rounding does
+not change. So the corner advances the opening by ``r`` near null and the
+advance fades out over a few radii: ``o_r = o + r / (1 + (max(o, 0) / (3 r))^2)``
+(:func:`rounded_opening`). Radial clearance and corner rounding
+``h = clearance + corner radius`` make every edge leak near null through an
+effective opening ``o_eff = h * softplus(o_r / h)`` (0.69 h at null). The
 slot is dual-gain: width ``w_null`` near null, widening linearly to ``w_out``
 between ``s_a`` and ``s_b`` of the spool stroke. Metering area ``A(o_eff)`` is
 the integral of the width.
@@ -54,7 +65,7 @@ class ServovalveParams:
     spool_stroke_m : float, default=4e-4
         Maximum spool displacement from null [m].
     spool_time_constant_s : float, default=2.5e-3
-        First-order spool time constant tau_s [s].
+        First-order spool time constant tau_s [s] with a clean filter.
     feedback_backlash_m : float, default=5e-7
         Play width b of the feedback-spring attachment [m].
     spool_friction_n : float, default=1.0
@@ -79,8 +90,9 @@ class ServovalveParams:
         Corner radius of the spool lands [m].
     lap_m : float, default=0.0
         Lap u of the metering edges [m] (> 0 overlap, < 0 underlap).
-    filter_flow_factor : float, default=1.0
-        Inlet filter flow factor alpha_f in (0, 1] (1 = clean).
+    pilot_supply_fraction : float, default=1.0
+        Pilot-stage supply pressure over the supply pressure rise, beta_p in (0, 1] (1 = clean
+        inlet filter; lowered by filter contamination).
     null_bias_drift_a : float, default=0.0
         Drift of the null bias dInb [A] (degradation, added to Inb0).
     """
@@ -101,7 +113,7 @@ class ServovalveParams:
     radial_clearance_m: float = 6e-6
     corner_radius_m: float = 1e-6
     lap_m: float = 0.0
-    filter_flow_factor: float = 1.0
+    pilot_supply_fraction: float = 1.0
     null_bias_drift_a: float = 0.0
 
     def __post_init__(self) -> None:
@@ -122,7 +134,7 @@ class ServovalveParams:
             "radial_clearance_m": POSITIVE,
             "corner_radius_m": NON_NEGATIVE,
             "lap_m": (-1e-4, 1e-4, True),
-            "filter_flow_factor": (0.0, 1.0, False),
+            "pilot_supply_fraction": (0.0, 1.0, False),
             "null_bias_drift_a": (-1e-2, 1e-2, True),
         })
         if self.transition_end < self.transition_start:
@@ -140,9 +152,9 @@ class ServovalveParams:
         return self.radial_clearance_m + self.corner_radius_m
 
     @property
-    def effective_lap_m(self) -> float:
-        """Effective lap of the metering edges: lap - corner radius [m] (negative: underlap)."""
-        return self.lap_m - self.corner_radius_m
+    def spool_rate_per_s(self) -> float:
+        """Spool rate ``sqrt(beta_p) / tau_s`` [1/s] (pilot flow through the inlet filter)."""
+        return math.sqrt(self.pilot_supply_fraction) / self.spool_time_constant_s
 
     @property
     def total_null_bias_a(self) -> float:
@@ -151,7 +163,8 @@ class ServovalveParams:
 
     def friction_dead_zone_m(self, supply_rise_pa: float) -> float:
         """Half-width of the friction dead zone on the spool error [m] at a supply rise [Pa]."""
-        k_drive = self.spool_end_area_m2 * max(supply_rise_pa, 1.0) / self.pilot_error_span_m
+        k_drive = (self.pilot_supply_fraction * self.spool_end_area_m2 * max(supply_rise_pa, 1e5)
+                   / self.pilot_error_span_m)
         return self.spool_friction_n / k_drive
 
 
@@ -176,6 +189,37 @@ def effective_opening(o: float, h: float) -> float:
     return h * math.log1p(math.exp(z))
 
 
+@numba.njit(cache=True, inline="always")
+def rounded_opening(o: float, r: float) -> float:
+    """Geometric opening [m] advanced by a rounded land corner of radius ``r`` [m].
+
+    ``o + r`` near and below the edge, fading to ``o`` over a few radii above it
+    (monotone: the slope stays above 0.78).
+    """
+    if r <= 0.0:
+        return o
+    if o <= 0.0:
+        return o + r
+    z = o / (3.0 * r)
+    return o + r / (1.0 + z * z)
+
+
+@numba.njit(cache=True, inline="always")
+def spool_stop(x_s: float, x_fb: float, half_play: float, stroke: float) -> tuple[float, float]:
+    """Apply the spool's mechanical stops at +/- ``stroke`` [m]; the feedback point stays within the play."""
+    if x_s > stroke:
+        x_s = stroke
+    elif x_s < -stroke:
+        x_s = -stroke
+    else:
+        return x_s, x_fb
+    if x_fb > x_s + half_play:
+        x_fb = x_s + half_play
+    elif x_fb < x_s - half_play:
+        x_fb = x_s - half_play
+    return x_s, x_fb
+
+
 @numba.njit(cache=True)
 def spool_advance(x_s: float, x_fb: float, x_c: float, dt: float, rate: float,
                   half_play: float, dead_zone: float, decay: float = -1.0) -> tuple[float, float]:
@@ -190,7 +234,7 @@ def spool_advance(x_s: float, x_fb: float, x_c: float, dt: float, rate: float,
     dt : float
         Duration [s].
     rate : float
-        ``alpha_f / tau_s`` [1/s].
+        ``sqrt(beta_p) / tau_s`` [1/s].
     half_play : float
         Half of the backlash play b/2 [m].
     dead_zone : float

@@ -236,7 +236,7 @@ class OperatingSpec(Spec):
     throttle_step_interval_s : float, default=90.0
         Mean interval between throttle steps [s], > 0.
     n2_noise_std : float, default=0.002
-        Per-frame N2 fluctuation [-], in [0, 0.05].
+        Standard deviation of the slow band-limited fluctuation of the N2 demand [-], in [0, 0.05].
     fuel_temp_start_degc : float, default=15.0
         Mean fuel temperature at the start of a flight [degC], in [-60, 150] (each flight draws around it).
     fuel_temp_end_degc : float, default=70.0
