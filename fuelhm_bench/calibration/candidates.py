@@ -16,6 +16,9 @@ effect                 fitted [range]                               held
 ``lvdt_lag``           ``time_constant_s`` (log) [1e-4, 0.5] s      --
 ``load_stiffness``     ``stiffness_n_m`` [-5e5, 5e5] N/m,           --
                        ``reference_m`` [0, stroke] m
+``current_driver_lag`` ``time_constant_s`` (log) [1e-4, 0.5] s      --
+``torque_motor_        ``width_a`` (log) [1e-6, 5e-3] A              --
+hysteresis``
 =====================  ==========================================  ==============================================
 
 Held parameters: the Stribeck velocity shapes the friction below a few mm/s, where the
@@ -96,6 +99,12 @@ def candidates(stroke_m: float = 0.06) -> dict[str, EffectCandidate]:
             "load_stiffness", (_p("load_stiffness", "stiffness_n_m", "N/m", 1e4, -5e5, 5e5),
                                _p("load_stiffness", "reference_m", "m", 0.005, 0.0, stroke_m)), {},
             tuple({"stiffness_n_m": v, "reference_m": mid} for v in (-8e4, -2e4, 2e4, 8e4))),
+        "current_driver_lag": EffectCandidate(
+            "current_driver_lag", (_p("current_driver_lag", "time_constant_s", "s", 0.3, 1e-4, 0.5, log=True),), {},
+            tuple({"time_constant_s": v} for v in (0.003, 0.012, 0.05))),
+        "torque_motor_hysteresis": EffectCandidate(
+            "torque_motor_hysteresis", (_p("torque_motor_hysteresis", "width_a", "A", 0.3, 1e-6, 5e-3, log=True),), {},
+            tuple({"width_a": v} for v in (3e-5, 1.5e-4, 6e-4))),
     }
 
 

@@ -76,7 +76,7 @@ BROYDEN = True
 PARAMETER_UNITS: dict[str, str] = {
     "overlap_m": "m", "stiffness_ratio": "-", "coulomb_n": "N", "static_ratio": "-",
     "stribeck_velocity_m_s": "m/s", "viscous_n_s_m": "N s/m", "time_constant_s": "s",
-    "stiffness_n_m": "N/m", "reference_m": "m",
+    "stiffness_n_m": "N/m", "reference_m": "m", "width_a": "A",
 }
 
 

@@ -18,6 +18,13 @@ id                      equation
                         force is within +/-F_s)
 ``lvdt_lag``            extra first-order lag ``tau`` on the measured position
 ``load_stiffness``      ``F_L += k_x (x - x_ref)`` position-dependent load
+``current_driver_lag``  coil current lags the recorded command:
+                        ``tau di_coil/dt = i_cmd - i_coil`` (the spool sees its
+                        exact mean over each frame)
+``torque_motor_``       play (backlash operator) of full width ``h`` between the
+``hysteresis``          coil current and the torque-motor torque (magnetic
+                        hysteresis of the armature): the spool command follows
+                        ``i_p = clip(i_p, i - h/2, i + h/2)``
 ======================  =====================================================
 """
 
@@ -134,9 +141,48 @@ class LoadStiffness:
         check_fields(self, {"stiffness_n_m": (-5e5, 5e5, True), "reference_m": (0.0, 1.0, True)})
 
 
-Effect = SpoolOverlap | SpoolFlowForce | RodFriction | LvdtLag | LoadStiffness
+@dataclass(frozen=True)
+class CurrentDriverLag:
+    """First-order lag of the coil current behind the commanded (recorded) current.
 
-EFFECTS: dict[str, type] = {cls.id: cls for cls in (SpoolOverlap, SpoolFlowForce, RodFriction, LvdtLag, LoadStiffness)}
+    The current driver (a voltage amplifier driving the coil inductance) follows the
+    command with a time constant ``L / R``; the recorded current is the command.
+
+    Parameters
+    ----------
+    time_constant_s : float, default=0.02
+        Lag time constant tau [s], in (0, 0.5].
+    """
+
+    id: ClassVar[str] = "current_driver_lag"
+    time_constant_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"time_constant_s": (0.0, 0.5, False)})
+
+
+@dataclass(frozen=True)
+class TorqueMotorHysteresis:
+    """Magnetic hysteresis of the torque motor, as a play on the coil current.
+
+    Parameters
+    ----------
+    width_a : float, default=2e-4
+        Full width h of the play [A], in (0, 5e-3].
+    """
+
+    id: ClassVar[str] = "torque_motor_hysteresis"
+    width_a: float = 2e-4
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"width_a": (0.0, 5e-3, False)})
+
+
+Effect = (SpoolOverlap | SpoolFlowForce | RodFriction | LvdtLag | LoadStiffness | CurrentDriverLag
+          | TorqueMotorHysteresis)
+
+EFFECTS: dict[str, type] = {cls.id: cls for cls in (SpoolOverlap, SpoolFlowForce, RodFriction, LvdtLag, LoadStiffness,
+                                                    CurrentDriverLag, TorqueMotorHysteresis)}
 assert tuple(EFFECTS) == EFFECT_IDS
 
 
@@ -209,5 +255,5 @@ def parse_effect_spec(spec: str) -> Effect:
     return make_effect(effect_id.strip(), **params)
 
 
-__all__ = ["EFFECTS", "Effect", "LoadStiffness", "LvdtLag", "RodFriction", "SpoolFlowForce", "SpoolOverlap",
+__all__ = ["CurrentDriverLag", "EFFECTS", "Effect", "TorqueMotorHysteresis", "LoadStiffness", "LvdtLag", "RodFriction", "SpoolFlowForce", "SpoolOverlap",
            "effect_parameters", "make_effect", "parse_effect_spec", "NON_NEGATIVE"]

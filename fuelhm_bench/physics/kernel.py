@@ -38,13 +38,13 @@ _K_NAMES = (
     "frame", "kp", "ki", "zmax", "dead_band", "isat", "dgain", "doff", "inb", "ksv", "spool_stroke",
     "rate", "half_play", "fric_num", "ff_ratio", "w_null", "w_out", "o_a", "o_b", "dps100", "faero100",
     "kx", "xref", "fc", "fs", "vs", "bv", "stroke", "noise", "quantum", "rmin", "rmax", "lagsel",
-    "direct", "endstops",
+    "direct", "endstops", "drvlag", "hyst",
 )
 K = {name: i for i, name in enumerate(_K_NAMES)}
 K_N = len(_K_NAMES)
 (K_FRAME, K_KP, K_KI, K_ZMAX, K_DB, K_ISAT, K_DGAIN, K_DOFF, K_INB, K_KSV, K_SSTROKE, K_RATE, K_HPLAY,
  K_FRICNUM, K_FF, K_WNULL, K_WOUT, K_OA, K_OB, K_DPS100, K_FAERO100, K_KX, K_XREF, K_FC, K_FS, K_VS, K_BV,
- K_STROKE, K_NOISE, K_Q, K_RMIN, K_RMAX, K_LAGSEL, K_DIRECT, K_ENDSTOPS) = range(K_N)
+ K_STROKE, K_NOISE, K_Q, K_RMIN, K_RMAX, K_LAGSEL, K_DIRECT, K_ENDSTOPS, K_DRVLAG, K_HYST) = range(K_N)
 
 #: Velocity table grid: spool positions (fraction of stroke) x N2 nodes.
 TABLE_NX = 801
@@ -134,6 +134,10 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     k[K_LAGSEL] = 1.0 if lag else 0.0
     k[K_DIRECT] = 1.0 if (ls or rf) else 0.0
     k[K_ENDSTOPS] = 1.0
+    dl = model.effect("current_driver_lag")
+    k[K_DRVLAG] = dl.time_constant_s if dl else 0.0
+    hy = model.effect("torque_motor_hysteresis")
+    k[K_HYST] = 0.5 * hy.width_a if hy else 0.0
     lv = lvdt_discretization(model.lvdt, lag.time_constant_s if lag else 0.0, ct.frame_s)
     return c, k, lv
 
@@ -290,6 +294,11 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
     inv_n2_step = 1.0 / n2_step
     forced = x_force.shape[0] >= n
     open_loop = i_open.shape[0] >= n
+    # optional effects current_driver_lag / torque_motor_hysteresis (states: lagged and played current)
+    tdl = k[K_DRVLAG]
+    edl = math.exp(-T / tdl) if tdl > 0.0 else 0.0
+    i_lag = np.nan
+    i_play = np.nan
     for t in range(n):
         if forced and not math.isnan(x_force[t]):
             x = x_force[t]
@@ -321,7 +330,21 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
             i = i_open[t]
         n2 = n2s[t]
         dps = k[K_DPS100] * n2 * n2
-        x_c = spool_command(i, dps, k)
+        i_sv = i
+        if tdl > 0.0:  # exact mean of the lagged current over the frame, then its end value
+            if math.isnan(i_lag):
+                i_lag = i
+            i_sv = i + (i_lag - i) * tdl / T * (1.0 - edl)
+            i_lag = i + (i_lag - i) * edl
+        if k[K_HYST] > 0.0:
+            if math.isnan(i_play):
+                i_play = i_sv
+            elif i_sv > i_play + k[K_HYST]:
+                i_play = i_sv - k[K_HYST]
+            elif i_sv < i_play - k[K_HYST]:
+                i_play = i_sv + k[K_HYST]
+            i_sv = i_play
+        x_c = spool_command(i_sv, dps, k)
         dz = k[K_FRICNUM] / max(dps, 1e5)
         # 3. spool positions at the two Gauss-Legendre points of the frame and at its end
         xa, fa = spool_advance(x_s, x_fb, x_c, t1, rate, hplay, dz, d1)
