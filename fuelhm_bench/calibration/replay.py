@@ -177,6 +177,10 @@ class ReplaySet:
         Whether N2 came from the file (else ``ReplayConfig.n2_default_pct``).
     config : ReplayConfig
         The configuration used.
+    time_s : numpy.ndarray or None
+        Time in flight of every sample [s] (for the sparse probe of the discrepancy workflow).
+    fuel_temp_degc : numpy.ndarray or None
+        Fuel temperature [degC], when the file has ``fuel_temp_degC``.
     """
 
     frame_s: float
@@ -197,6 +201,8 @@ class ReplaySet:
     unit_ids: tuple
     n2_measured: bool
     config: ReplayConfig = field(default_factory=ReplayConfig)
+    time_s: np.ndarray | None = None
+    fuel_temp_degc: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -344,6 +350,7 @@ def prepare_replay(flights, *, config: ReplayConfig = ReplayConfig(), stroke_m: 
         n2_pct = np.asarray(f.extras["n2_pct"], dtype=float) if n2_measured else np.full(f.n_samples,
                                                                                           cfg.n2_default_pct)
         phase = f.extras.get("phase")
+        temp = f.extras.get("fuel_temp_degC")
         i_lo, i_hi = float(np.min(f.current_ma)), float(np.max(f.current_ma))
         for a, b in _runs(np.asarray(f.time_s), frame_s, cfg):
             r = _run_samples(f, a, b, frame_s, stroke_mm, cfg, n2_pct, i_lo, i_hi)
@@ -365,6 +372,8 @@ def prepare_replay(flights, *, config: ReplayConfig = ReplayConfig(), stroke_m: 
                         "kind": kind, "flight": fi, "scored": scored, "n_scored": int(scored.sum()), "cells": cells,
                         "cur": r["cur"][s0:s1], "pos": r["pos"][s0:s1], "n2": r["n2"][s0:s1],
                         "phase": None if phase is None else np.asarray(phase[a:b], dtype=object)[s0:s1],
+                        "time": np.asarray(f.time_s, dtype=float)[a:b][s0:s1],
+                        "temp": None if temp is None else np.asarray(temp[a:b], dtype=float)[s0:s1],
                     })
     if not pieces:
         raise DataFormatError(
@@ -471,7 +480,9 @@ def _assemble(pieces: list[dict], flights, frame_s: float, cfg: ReplayConfig, n2
         lengths=lengths, scored=scored, v_meas_mm_s=v, i_ma=i_m, direction=direction, moving=moving & scored,
         position_mm=pos, flight=flight, phase=phase,
         flight_ids=tuple(f.flight_id for f in flights), unit_ids=tuple(f.unit_id for f in flights),
-        n2_measured=n2_measured, config=cfg)
+        n2_measured=n2_measured, config=cfg, time_s=np.concatenate([p["time"] for p in pieces]),
+        fuel_temp_degc=(np.concatenate([p["temp"] for p in pieces]) if all(p["temp"] is not None for p in pieces)
+                        else None))
 
 
 # --------------------------------------------------------------------------- model side
