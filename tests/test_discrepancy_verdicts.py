@@ -16,9 +16,8 @@ from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrep
 from fuelhm_bench.calibration.flags import absorbing_parameters, dispersion_sigma
 from fuelhm_bench.calibration.probe import sparse_probe
 from fuelhm_bench.calibration.recalibrate import CalibrationConfig, prepare_units
-from fuelhm_bench.cli import main
 from fuelhm_bench.errors import ParameterError
-from fuelhm_bench.io import split_flights, write_flights
+from fuelhm_bench.io import split_flights
 from fuelhm_bench.physics.model import LoopModel
 from fuelhm_bench.validation.altsim import AltEffects, simulate_flights
 
@@ -105,8 +104,18 @@ def test_verdict_effect_names_an_lvdt_lag_of_altsim_data():
     assert r.effect_set[0].share == pytest.approx(1.0) or len(r.effect_set) > 1
 
 
-def test_verdict_unexplained_on_an_effect_outside_the_library(tmp_path):
-    frame, _ = _flights(AltEffects(supply_droop_pa_s_m3=4e10), seed=31)
-    path = write_flights(frame, tmp_path / "droop.parquet")
-    code = main(["discrepancy", str(path), "--json", "--candidates", ",".join(FAST), "--jobs", "2"])
-    assert code == 0
+def test_verdict_unexplained_on_an_effect_outside_the_library():
+    # A supply-pressure droop under flow: no library effect; the recalibration absorbs it into the
+    # outer slot width and the aerodynamic load (far outside their dispersion).
+    _, flights = _flights(AltEffects(supply_droop_pa_s_m3=4e10), seed=31)
+    r = find_discrepancy(flights, config=SMALL)
+    assert r.verdict == "unexplained", [(c.label, round(c.delta_bic), round(c.gap_reduction, 2)) for c in r.ranking]
+    # Never a single confident wrong library effect.
+    assert r.effect_set == () or r.verdict != "effect"
+    assert {f.path for f in r.flags} & {"servovalve.slot_width_outer_m", "load.aero_force_at_100pct_n"}
+    assert "absorbed by the recalibration" in r.unexplained and "largest local gaps" in r.unexplained
+    assert r.probe is not None and r.probe.terms and r.probe.gap_closed > 0.2
+    out = json.loads(json.dumps(r.as_json(), default=float))
+    assert out["verdict"] == "unexplained" and out["set"] == []
+    assert out["flags"] and out["flags"][0]["reading"] == "likely absorbing a missing effect"
+    assert out["probe"]["terms"][0]["term"] == r.probe.terms[0]
