@@ -38,4 +38,5 @@ EFFECT_IDS: tuple[str, ...] = (
     "load_stiffness",
     "current_driver_lag",
     "torque_motor_hysteresis",
+    "viscosity_temperature",
 )

@@ -27,7 +27,8 @@ from fuelhm_bench.taxonomy import EFFECT_IDS
 SMALL = DiscrepancyConfig(calibration=CalibrationConfig(fit_max_frames=16000), heldout_max_frames=60000, n_jobs=2)
 #: Seed of each hidden-effect data set (the magnitude is drawn from it in TEST_RANGES).
 SEEDS = {"spool_overlap": 21, "spool_flow_force": 22, "rod_friction": 23, "lvdt_lag": 24, "load_stiffness": 25,
-         "none": 26, "current_driver_lag": 27, "torque_motor_hysteresis": 28}
+         "none": 26, "current_driver_lag": 27, "torque_motor_hysteresis": 28,
+         "viscosity_temperature": 29}
 
 
 def _data(effect, **kw):

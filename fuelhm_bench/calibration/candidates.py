@@ -19,6 +19,8 @@ effect                 fitted [range]                               held
 ``current_driver_lag`` ``time_constant_s`` (log) [1e-4, 0.5] s      --
 ``torque_motor_        ``width_a`` (log) [1e-6, 5e-3] A              --
 hysteresis``
+``viscosity_           ``leak_at_20c_m3_s_pa`` (log) [1e-15, 1e-9]  ``slope_per_degc`` = 0.02 /degC (kerosene;
+temperature``                                                       the flights' temperatures rarely separate it)
 =====================  ==========================================  ==============================================
 
 Held parameters: the Stribeck velocity shapes the friction below a few mm/s, where the
@@ -105,6 +107,10 @@ def candidates(stroke_m: float = 0.06) -> dict[str, EffectCandidate]:
         "torque_motor_hysteresis": EffectCandidate(
             "torque_motor_hysteresis", (_p("torque_motor_hysteresis", "width_a", "A", 0.3, 1e-6, 5e-3, log=True),), {},
             tuple({"width_a": v} for v in (3e-5, 1.5e-4, 6e-4))),
+        "viscosity_temperature": EffectCandidate(
+            "viscosity_temperature", (_p("viscosity_temperature", "leak_at_20c_m3_s_pa", "m3/(s Pa)", 0.3, 1e-15,
+                                         1e-9, log=True),), {"slope_per_degc": 0.02},
+            tuple({"leak_at_20c_m3_s_pa": v} for v in (1e-13, 1e-12, 1e-11))),
     }
 
 

@@ -25,6 +25,11 @@ id                      equation
 ``hysteresis``          coil current and the torque-motor torque (magnetic
                         hysteresis of the armature): the spool command follows
                         ``i_p = clip(i_p, i - h/2, i + h/2)``
+``viscosity_``          laminar cross-piston leak through the seal clearance,
+``temperature``         inversely proportional to the fuel viscosity
+                        ``mu(T) = mu_20 exp(-b (T - 20 degC))``:
+                        ``K_li += K_20 exp(b (T - 20))``, T the flight's
+                        ``fuel_temp_degC`` (20 degC when the data have none)
 ======================  =====================================================
 """
 
@@ -178,11 +183,37 @@ class TorqueMotorHysteresis:
         check_fields(self, {"width_a": (0.0, 5e-3, False)})
 
 
+@dataclass(frozen=True)
+class ViscosityTemperature:
+    """Laminar cross-piston leak whose conductance follows the fuel viscosity with temperature.
+
+    Parameters
+    ----------
+    leak_at_20c_m3_s_pa : float, default=1e-12
+        Leak conductance at 20 degC K_20 [m^3/(s Pa)], in (0, 1e-9].
+    slope_per_degc : float, default=0.02
+        Viscosity temperature coefficient b [1/degC], in [0, 0.1] (kerosene: about 0.02).
+    """
+
+    id: ClassVar[str] = "viscosity_temperature"
+    leak_at_20c_m3_s_pa: float = 1e-12
+    slope_per_degc: float = 0.02
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"leak_at_20c_m3_s_pa": (0.0, 1e-9, False), "slope_per_degc": (0.0, 0.1, True)})
+
+    def leak_coefficient(self, temp_degc: float) -> float:
+        """Leak conductance at a fuel temperature [m^3/(s Pa)]."""
+        import math
+
+        return self.leak_at_20c_m3_s_pa * math.exp(self.slope_per_degc * (temp_degc - 20.0))
+
+
 Effect = (SpoolOverlap | SpoolFlowForce | RodFriction | LvdtLag | LoadStiffness | CurrentDriverLag
-          | TorqueMotorHysteresis)
+          | TorqueMotorHysteresis | ViscosityTemperature)
 
 EFFECTS: dict[str, type] = {cls.id: cls for cls in (SpoolOverlap, SpoolFlowForce, RodFriction, LvdtLag, LoadStiffness,
-                                                    CurrentDriverLag, TorqueMotorHysteresis)}
+                                                    CurrentDriverLag, TorqueMotorHysteresis, ViscosityTemperature)}
 assert tuple(EFFECTS) == EFFECT_IDS
 
 
@@ -255,5 +286,5 @@ def parse_effect_spec(spec: str) -> Effect:
     return make_effect(effect_id.strip(), **params)
 
 
-__all__ = ["CurrentDriverLag", "EFFECTS", "Effect", "TorqueMotorHysteresis", "LoadStiffness", "LvdtLag", "RodFriction", "SpoolFlowForce", "SpoolOverlap",
+__all__ = ["CurrentDriverLag", "EFFECTS", "Effect", "TorqueMotorHysteresis", "ViscosityTemperature", "LoadStiffness", "LvdtLag", "RodFriction", "SpoolFlowForce", "SpoolOverlap",
            "effect_parameters", "make_effect", "parse_effect_spec", "NON_NEGATIVE"]

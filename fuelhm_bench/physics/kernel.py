@@ -62,8 +62,10 @@ STATUS_OK, STATUS_NONFINITE = 0, 1
 _SAFE_FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
 
 
-def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def pack_model(model, fuel_temp_degc: float = 20.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Flatten a :class:`~fuelhm_bench.physics.model.LoopModel` into kernel vectors.
+
+    ``fuel_temp_degc`` (the flight's fuel temperature) only matters with ``viscosity_temperature``.
 
     Returns
     -------
@@ -90,6 +92,9 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     c[cyl.C_CQC] = (cy.diaphragm_open_fraction * cy.diaphragm_discharge_coefficient * cy.diaphragm_area_m2
                     * fl.flow_constant)
     c[cyl.C_KLI] = cy.leakage_coefficient_m3_s_pa
+    vt = model.effect("viscosity_temperature")
+    if vt:
+        c[cyl.C_KLI] += vt.leak_coefficient(fuel_temp_degc)
     c[cyl.C_PR] = fl.return_pressure_pa
     c[cyl.C_PCR] = fl.regularisation_pressure_pa
 
