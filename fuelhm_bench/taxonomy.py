@@ -36,4 +36,7 @@ EFFECT_IDS: tuple[str, ...] = (
     "rod_friction",
     "lvdt_lag",
     "load_stiffness",
+    "current_driver_lag",
+    "torque_motor_hysteresis",
+    "viscosity_temperature",
 )

@@ -27,7 +27,8 @@ from sizes import DISCREPANCY_FLIGHTS, DISCREPANCY_MINUTES, DISCREPANCY_UNITS, d
 SMALL = discrepancy_config()
 #: Seed of each hidden-effect data set (the magnitude is drawn from it in TEST_RANGES).
 SEEDS = {"spool_overlap": 21, "spool_flow_force": 22, "rod_friction": 23, "lvdt_lag": 24, "load_stiffness": 25,
-         "none": 26}
+         "none": 26, "current_driver_lag": 27, "torque_motor_hysteresis": 28,
+         "viscosity_temperature": 29}
 
 
 def _data(effect, **kw):

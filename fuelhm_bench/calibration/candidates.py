@@ -16,6 +16,11 @@ effect                 fitted [range]                               held
 ``lvdt_lag``           ``time_constant_s`` (log) [1e-4, 0.5] s      --
 ``load_stiffness``     ``stiffness_n_m`` [-5e5, 5e5] N/m,           --
                        ``reference_m`` [0, stroke] m
+``current_driver_lag`` ``time_constant_s`` (log) [1e-4, 0.5] s      --
+``torque_motor_        ``width_a`` (log) [1e-6, 5e-3] A              --
+hysteresis``
+``viscosity_           ``leak_at_20c_m3_s_pa`` (log) [1e-15, 1e-9]  ``slope_per_degc`` = 0.02 /degC (kerosene;
+temperature``                                                       the flights' temperatures rarely separate it)
 =====================  ==========================================  ==============================================
 
 Held parameters: the Stribeck velocity shapes the friction below a few mm/s, where the
@@ -96,6 +101,16 @@ def candidates(stroke_m: float = 0.06) -> dict[str, EffectCandidate]:
             "load_stiffness", (_p("load_stiffness", "stiffness_n_m", "N/m", 1e4, -5e5, 5e5),
                                _p("load_stiffness", "reference_m", "m", 0.005, 0.0, stroke_m)), {},
             tuple({"stiffness_n_m": v, "reference_m": mid} for v in (-8e4, -2e4, 2e4, 8e4))),
+        "current_driver_lag": EffectCandidate(
+            "current_driver_lag", (_p("current_driver_lag", "time_constant_s", "s", 0.3, 1e-4, 0.5, log=True),), {},
+            tuple({"time_constant_s": v} for v in (0.003, 0.012, 0.05))),
+        "torque_motor_hysteresis": EffectCandidate(
+            "torque_motor_hysteresis", (_p("torque_motor_hysteresis", "width_a", "A", 0.3, 1e-6, 5e-3, log=True),), {},
+            tuple({"width_a": v} for v in (3e-5, 1.5e-4, 6e-4))),
+        "viscosity_temperature": EffectCandidate(
+            "viscosity_temperature", (_p("viscosity_temperature", "leak_at_20c_m3_s_pa", "m3/(s Pa)", 0.3, 1e-15,
+                                         1e-9, log=True),), {"slope_per_degc": 0.02},
+            tuple({"leak_at_20c_m3_s_pa": v} for v in (1e-13, 1e-12, 1e-11))),
     }
 
 

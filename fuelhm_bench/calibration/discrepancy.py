@@ -48,6 +48,8 @@ from fuelhm_bench.calibration import replay as rp
 from fuelhm_bench.calibration.candidates import EffectCandidate, get_candidates
 from fuelhm_bench.calibration.curve import CurveConfig, gap, gap_metric_text, gap_noise_floor
 from fuelhm_bench.calibration.fit import JointFit, apply_values, fit_joint
+from fuelhm_bench.calibration.flags import ParameterFlag, absorbing_parameters
+from fuelhm_bench.calibration.probe import ProbeResult, sparse_probe
 from fuelhm_bench.calibration.recalibrate import (
     NO_UNIT,
     RECALIBRATION_PARAMETERS,
@@ -76,7 +78,8 @@ BROYDEN = True
 PARAMETER_UNITS: dict[str, str] = {
     "overlap_m": "m", "stiffness_ratio": "-", "coulomb_n": "N", "static_ratio": "-",
     "stribeck_velocity_m_s": "m/s", "viscous_n_s_m": "N s/m", "time_constant_s": "s",
-    "stiffness_n_m": "N/m", "reference_m": "m",
+    "stiffness_n_m": "N/m", "reference_m": "m", "width_a": "A",
+    "leak_at_20c_m3_s_pa": "m3/(s Pa)", "slope_per_degc": "1/degC",
 }
 
 
@@ -98,14 +101,35 @@ class DiscrepancyConfig:
         Candidate effects.
     bic_threshold : float, default=10.0
         BIC improvement over the recalibrated model a candidate needs [-].
-    min_gap_reduction : float, default=0.3
-        Relative held-out gap reduction over the recalibrated model a candidate needs, in [0, 1).
+    min_gap_reduction : float, default=0.5
+        Relative held-out gap reduction over the recalibrated model a candidate needs, in [0, 1) (0.5: on
+        healthy altsim data a wrong candidate reached 33 %, docs/discrepancy.md).
     candidate_iterations : int, default=12
         Trust-region iterations of each candidate fit.
     n_jobs : int, default=1
         Worker processes for the candidate fits.
     seed : int, default=0
         Seed of the split and of the segment draws.
+    hold_flagged : bool, default=True
+        Also fit every candidate with the recalibrated parameters flagged as absorbing
+        (:mod:`~fuelhm_bench.calibration.flags`) held at the input model's values.
+    max_effects : int, default=3
+        Most effects of the forward selection.
+    min_step_reduction : float, default=0.2
+        Held-out gap reduction (relative to the set so far) that a second or later effect needs.
+    continue_ratio : float, default=1.5
+        The forward selection stops when the held-out gap is below this multiple of its noise floor.
+    equivalence_margin : float, default=0.1
+        An eligible candidate whose held-out gap reduction is within this of the selected one's
+        is reported as an equivalent explanation.
+    unexplained_ratio : float, default=2.0
+        Verdict ``unexplained`` needs the final held-out gap at least this multiple of its noise floor ...
+    unexplained_score : float, default=30.0
+        ... and the final model's held-out misfit score at least this (calibrated on healthy
+        altsim data, docs/discrepancy.md section 5).
+    absorbed_z : float, default=5.0
+        ... or a value of the final fit at least this many dispersion sigmas from the input model
+        (a disagreement absorbed by the recalibration that no candidate explains).
     """
 
     calibration: CalibrationConfig = field(default_factory=lambda: CalibrationConfig(fit_max_frames=40000))
@@ -113,12 +137,30 @@ class DiscrepancyConfig:
     heldout_max_frames: int | None = 200000
     candidates: tuple = EFFECT_IDS
     bic_threshold: float = 10.0
-    min_gap_reduction: float = 0.3
+    min_gap_reduction: float = 0.5
     candidate_iterations: int = 12
     n_jobs: int = 1
     seed: int = 0
+    hold_flagged: bool = True
+    max_effects: int = 3
+    min_step_reduction: float = 0.2
+    continue_ratio: float = 1.5
+    equivalence_margin: float = 0.1
+    unexplained_ratio: float = 2.0
+    unexplained_score: float = 30.0
+    absorbed_z: float = 5.0
 
     def __post_init__(self) -> None:
+        if not isinstance(self.max_effects, int) or isinstance(self.max_effects, bool) or self.max_effects < 1:
+            raise range_error("DiscrepancyConfig.max_effects", "an integer >= 1", self.max_effects)
+        for name in ("min_step_reduction", "equivalence_margin"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 <= v < 1.0):
+                raise range_error(f"DiscrepancyConfig.{name}", "in [0, 1)", v)
+        for name in ("continue_ratio", "unexplained_ratio", "unexplained_score", "absorbed_z"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise range_error(f"DiscrepancyConfig.{name}", "a finite number > 0", v)
         if not (isinstance(self.holdout_fraction, (int, float)) and 0.0 < self.holdout_fraction <= 0.9):
             raise range_error("DiscrepancyConfig.holdout_fraction", "in (0, 0.9]", self.holdout_fraction)
         if not isinstance(self.candidates, tuple) or not self.candidates:
@@ -143,7 +185,12 @@ class DiscrepancyConfig:
         """The decision rule in words."""
         return (f"accept the candidate with the lowest BIC on the fit flights if its BIC is lower than the "
                 f"recalibrated model's by more than {self.bic_threshold:g} AND it reduces the held-out gap by at "
-                f"least {100 * self.min_gap_reduction:g} % relative to recalibration alone; otherwise 'none'")
+                f"least {100 * self.min_gap_reduction:g} % relative to recalibration alone; add further effects "
+                f"(forward selection, up to {self.max_effects}) while the BIC improves by more than "
+                f"{self.bic_threshold:g} and the held-out gap shrinks by {100 * self.min_step_reduction:g} %; "
+                f"verdict 'unexplained' when the final held-out gap is >= {self.unexplained_ratio:g}x its noise "
+                f"floor and its misfit score >= {self.unexplained_score:g}, or a value of the final fit lies "
+                f">= {self.absorbed_z:g} dispersion sigmas from the input model; else the set ('effect') or 'none'")
 
 
 @dataclass(frozen=True)
@@ -240,6 +287,10 @@ class CandidateOutcome:
         Wall time [s].
     unit_values : dict
         Recalibration values per unit fitted jointly with the effect [SI].
+    held : tuple of str
+        Recalibration parameters held at the input model's values in this fit (flagged as absorbing).
+    tag : str
+        Forward-selection round ("1": candidates on top of recalibration alone).
     """
 
     effect: str
@@ -253,11 +304,18 @@ class CandidateOutcome:
     passes: int
     seconds: float
     unit_values: dict
+    held: tuple = ()
+    tag: str = "1"
+
+    @property
+    def label(self) -> str:
+        """Effect id, with the held parameters if any."""
+        return self.effect if not self.held else f"{self.effect} [held: {', '.join(self.held)}]"
 
     def as_json(self) -> dict:
         """JSON-ready summary."""
         return {
-            "effect": self.effect,
+            "effect": self.effect, "held_at_nominal": list(self.held),
             "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")} for k, v in self.parameters.items()},
             "bic": self.bic, "delta_bic": self.delta_bic, "gap_after": self.gap_after,
             "gap_reduction": self.gap_reduction, "eligible": self.eligible,
@@ -312,6 +370,19 @@ class DiscrepancyResult:
         Wall time [s].
     curve : CurveConfig
         Cells of the gap metric.
+    verdict : str
+        ``"effect"`` (the set explains the data), ``"none"`` (what remains is at the level of
+        healthy data of a plausible model) or ``"unexplained"`` (a significant disagreement remains).
+    effect_set : tuple of SetMember
+        The forward-selected effects, in order, with their share of the gap.
+    equivalents : tuple of Equivalent
+        Candidates explaining the data about as well as a selected one, with the separating test.
+    flags : tuple of ParameterFlag
+        Recalibrated values outside the manufacturing dispersion.
+    unexplained : str or None
+        Where the remaining disagreement is and what it looks like (verdict ``unexplained``).
+    probe : ProbeResult or None
+        Sparse probe of the remaining residuals (verdict ``unexplained``).
     """
 
     effect: str
@@ -337,6 +408,12 @@ class DiscrepancyResult:
     n2_measured: bool
     seconds: float
     curve: CurveConfig
+    verdict: str = "none"
+    effect_set: tuple = ()
+    equivalents: tuple = ()
+    flags: tuple = ()
+    unexplained: str | None = None
+    probe: ProbeResult | None = None
 
     @property
     def gap_reduction(self) -> float:
@@ -346,8 +423,14 @@ class DiscrepancyResult:
     def as_json(self) -> dict:
         """The JSON object printed by ``fuelhm-bench discrepancy --json``."""
         return {
+            "verdict": self.verdict,
             "effect": self.effect,
             "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")} for k, v in self.parameters.items()},
+            "set": [m.as_json() for m in self.effect_set],
+            "equivalents": [e.as_json() for e in self.equivalents],
+            "flags": [f.as_json() for f in self.flags],
+            "unexplained": self.unexplained,
+            "probe": None if self.probe is None else self.probe.as_json(),
             "region": self.region,
             "region_levels": [{"factor": lv.factor, "level": lv.level, "samples": lv.count, "score": lv.score,
                                "local_gap": lv.local_gap_mm_s}
@@ -377,6 +460,119 @@ def _jsonable(x):
 
 def _recal_values(model) -> dict:
     return {p.path: {"value": float(model.get(p.path)), "unit": p.unit} for p in RECALIBRATION_PARAMETERS}
+
+
+@dataclass(frozen=True)
+class SetMember:
+    """One effect of the forward-selected set.
+
+    Attributes
+    ----------
+    effect : str
+        Effect id.
+    parameters : dict
+        Fitted parameters [SI].
+    held : tuple of str
+        Recalibration parameters held at nominal in its fit.
+    gap_before, gap_after : float
+        Held-out gap before and after adding it [mm/s].
+    delta_bic : float
+        BIC gain of adding it [-].
+    share : float
+        Its share of the held-out gap closed by the whole set [-].
+    """
+
+    effect: str
+    parameters: dict
+    held: tuple
+    gap_before: float
+    gap_after: float
+    delta_bic: float
+    share: float = float("nan")
+
+    def as_json(self) -> dict:
+        """JSON-ready summary."""
+        return {"effect": self.effect,
+                "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")} for k, v in self.parameters.items()},
+                "held_at_nominal": list(self.held), "gap_before": self.gap_before, "gap_after": self.gap_after,
+                "delta_bic": self.delta_bic, "share": self.share}
+
+
+@dataclass(frozen=True)
+class Equivalent:
+    """An alternative explaining the data about as well as a selected effect.
+
+    Attributes
+    ----------
+    selected, alternative : str
+        Effect ids.
+    reduction_selected, reduction_alternative : float
+        Their held-out gap reductions [-].
+    delta_bic : float
+        BIC advantage of the selected one [-].
+    test : str
+        The measurement that would separate them.
+    """
+
+    selected: str
+    alternative: str
+    reduction_selected: float
+    reduction_alternative: float
+    delta_bic: float
+    test: str
+
+    def as_json(self) -> dict:
+        """JSON-ready summary."""
+        return dataclasses.asdict(self)
+
+
+#: Measurements that separate look-alike effects (unordered pairs).
+SEPARATING_TESTS: dict[frozenset, str] = {
+    frozenset({"lvdt_lag", "current_driver_lag"}):
+        "record the coil current (clamp meter or driver monitor) during a current step at standstill: a driver "
+        "lag shows the coil current lagging the command; an LVDT lag shows the coil current on time and only the "
+        "LVDT reading late (a second position reference, e.g. a dial gauge or the engine's secondary LVDT, "
+        "moves before it)",
+    frozenset({"spool_overlap", "rod_friction"}):
+        "slow current ramps through null at two N2 levels: an overlap is a dead band on the current that does "
+        "not depend on N2 or load; rod friction sticks over a current band that shrinks with supply pressure "
+        "and depends on the load direction",
+    frozenset({"spool_overlap", "torque_motor_hysteresis"}):
+        "slow triangular current sweeps through null: hysteresis shifts the rising and falling branches "
+        "apart (a loop); an overlap is a dead band at the same current on both branches",
+    frozenset({"current_driver_lag", "torque_motor_hysteresis"}):
+        "current sweeps at two rates: a driver lag's loop widens with the sweep rate, a hysteresis loop does not",
+    frozenset({"lvdt_lag", "torque_motor_hysteresis"}):
+        "current sweeps at two rates: an LVDT lag's apparent loop widens with the rod velocity, a hysteresis "
+        "loop does not",
+    frozenset({"spool_flow_force", "load_stiffness"}):
+        "hold one current at two rod positions and two N2: a flow force changes the velocity with supply "
+        "pressure only, a load stiffness with rod position",
+}
+
+
+def separating_test(a: str, b: str) -> str:
+    """The measurement that separates effects ``a`` and ``b`` (a generic one for unlisted pairs)."""
+    return SEPARATING_TESTS.get(frozenset({a, b}), (
+        f"compare the residual maps of '{a}' and '{b}' by region (current band, direction, N2, position); "
+        f"a test bench run exciting the region where they differ most separates them"))
+
+
+def describe_remainder(rmap, gap_mm_s: float, floor_mm_s: float, n_top: int = 3) -> str:
+    """Where the disagreement that no candidate explains is, and what it looks like."""
+    parts = []
+    seen = set()
+    for lv in rmap.ranked():
+        if lv.factor in seen:
+            continue
+        seen.add(lv.factor)
+        look = "measured faster than the model" if lv.mean_mm_s > 0 else "measured slower than the model"
+        parts.append(f"{lv.factor}: {lv.level} (local gap {lv.local_gap_mm_s:.2f} mm/s, mean residual "
+                     f"{lv.mean_mm_s:+.2f} mm/s, {look}, score {lv.score:.3g})")
+        if len(parts) == n_top:
+            break
+    return (f"held-out gap {gap_mm_s:.3f} mm/s = {gap_mm_s / floor_mm_s:.1f}x its noise floor, misfit score "
+            f"{rmap.score:.3g}; largest local gaps: " + "; ".join(parts))
 
 
 # --------------------------------------------------------------------------- split
@@ -633,29 +829,102 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
     outcomes = [CandidateOutcome("none", {}, bic0, 0.0, base.rss, g_recal, 0.0, False, base.passes, 0.0,
                                  base.unit_values)]
-    for cand in cands:
-        res, g, sec = results[cand.effect]
-        bic = noise.bic(res.rss, res.n_parameters)
-        eff_model = res.unit_models[next(iter(res.unit_models))].effect(cand.effect)
-        red = 1.0 - g / g_recal if g_recal > 0 else 0.0
-        outcomes.append(CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, bic0 - bic, res.rss,
-                                         g, red, False, res.passes, sec, res.unit_values))
-        say(f"candidate {cand.effect}: dBIC {bic0 - bic:.1f}, held-out gap {g:.3f} mm/s ({100 * red:+.0f} %), "
-            f"{res.passes} replays, {sec:.1f} s")
+    fits: dict = {}  # label -> (JointFit, held-out gap, candidate, held paths, parameters)
+
+    def collect(round_results: dict, held_paths: tuple, fit_params: tuple, ref_bic: float, ref_gap: float,
+                tag: str) -> list:
+        out = []
+        for cand in cands:
+            if cand.effect not in round_results:
+                continue
+            res, g, sec = round_results[cand.effect]
+            bic = noise.bic(res.rss, res.n_parameters)
+            eff_model = res.unit_models[next(iter(res.unit_models))].effect(cand.effect)
+            red = 1.0 - g / ref_gap if ref_gap > 0 else 0.0
+            label = cand.effect if not held_paths else f"{cand.effect} [held: {', '.join(held_paths)}]"
+            fits[(tag, label)] = (res, g, cand, held_paths, fit_params)
+            out.append(CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, ref_bic - bic, res.rss,
+                                        g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag))
+            say(f"candidate {label}: dBIC {ref_bic - bic:.1f}, held-out gap {g:.3f} mm/s ({100 * red:+.0f} %), "
+                f"{res.passes} replays, {sec:.1f} s")
+        return out
+
+    outcomes += collect(results, (), params, bic0, g_recal, "1")
+
+    # Recalibrated values outside the manufacturing dispersion likely absorb a missing effect:
+    # flag them, and fit every candidate again with them held at the input model's values.
+    flags = absorbing_parameters(base.unit_values, start)
+    if flags:
+        say("recalibrated values outside the dispersion: " + "; ".join(
+            f"unit {f.unit}: {f.path} {f.z:+.1f} sigma" for f in flags))
+    if flags and config.hold_flagged:
+        flagged = tuple(sorted({f.path for f in flags}))
+        held_params = tuple(p for p in params if p.path not in flagged)
+        held_base = dataclasses.replace(base, unit_values={
+            k: {**v, **{path: float(start.get(path)) for path in flagged}} for k, v in base.unit_values.items()})
+        payload_h = {**payload, "base": held_base, "parameters": held_params}
+        results_h = _run_candidates(cands, payload_h, config.n_jobs, None)
+        outcomes += collect(results_h, flagged, held_params, bic0, g_recal, "1")
+
     rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_gap_reduction}
-    chosen = decide(outcomes, **rule)
     outcomes = [dataclasses.replace(c, eligible=is_eligible(c, **rule)) for c in outcomes]
     ranking = tuple(sorted(outcomes, key=lambda c: c.bic))
 
-    if chosen == "none":
-        final_model, v_after, g_after, eff_params = fleet0, v_recal, g_recal, {}
+    # Forward selection: add the best eligible candidate, refit the others on top of it, repeat while
+    # the BIC improves by more than the threshold and the held-out gap shrinks by min_step_reduction.
+    members: list[SetMember] = []
+    equivalents: list[Equivalent] = []
+    cur = {"fit": base, "gap": g_recal, "bic": bic0, "model": fleet0, "params": params, "held": ()}
+    round_outcomes = [c for c in outcomes if c.effect != "none"]
+    round_rule = rule
+    for round_no in range(1, config.max_effects + 1):
+        eligible = [c for c in round_outcomes if is_eligible(c, **round_rule)]
+        if not eligible:
+            break
+        best = min(eligible, key=lambda c: c.bic)
+        for c in eligible:
+            if (c.effect != best.effect and c.effect not in {e.alternative for e in equivalents}
+                    and c.gap_reduction >= best.gap_reduction - config.equivalence_margin):
+                equivalents.append(Equivalent(best.effect, c.effect, best.gap_reduction, c.gap_reduction,
+                                              best.delta_bic - c.delta_bic, separating_test(best.effect, c.effect)))
+        res, g_new, cand, held_paths, fit_params = fits[(best.tag, best.label)]
+        new_model = apply_values(_with_effect(cur["model"], cand, cand.start_values({})),
+                                 {**fleet_values(res.unit_values, fit_params), **res.shared_values})
+        for path in held_paths:
+            new_model = new_model.with_parameters({path: start.get(path)})
+        members.append(SetMember(best.effect, dict(best.parameters), held_paths, cur["gap"], g_new,
+                                 cur["bic"] - best.bic))
+        say(f"selected {best.label} (round {round_no}): held-out gap {cur['gap']:.3f} -> {g_new:.3f} mm/s")
+        cur = {"fit": res, "gap": g_new, "bic": best.bic, "model": new_model, "params": fit_params,
+               "held": held_paths}
+        remaining = [c for c in cands if new_model.effect(c.effect) is None]
+        if round_no == config.max_effects or not remaining:
+            break
+        v_cur = held_velocity(heldout_models(res.unit_models, new_model, held_sets))
+        floor_cur = gap_noise_floor(held, v_cur, cal.curve, correlation_time([held], [v_cur]))
+        if g_new < config.continue_ratio * floor_cur:
+            say(f"held-out gap {g_new:.3f} mm/s within {config.continue_ratio:g}x its noise floor "
+                f"({floor_cur:.3f}): no further effect searched")
+            break
+        payload_k = {**payload, "candidates": remaining, "base": res, "start_model": new_model,
+                     "parameters": fit_params}
+        results_k = _run_candidates(remaining, payload_k, config.n_jobs, None)
+        tag = str(round_no + 1)
+        round_outcomes = collect({k: v for k, v in results_k.items()}, held_paths, fit_params, best.bic, g_new, tag)
+        round_rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_step_reduction}
+
+    chosen = members[0].effect if members else "none"
+    final_fit = cur["fit"]
+    final_model = cur["model"]
+    if members:
+        v_after = held_velocity(heldout_models(final_fit.unit_models, final_model, held_sets))
+        g_after = cur["gap"]
+        eff_params = dict(members[0].parameters)
     else:
-        res, g_after, _ = results[chosen]
-        cand = next(c for c in cands if c.effect == chosen)
-        final_model = apply_values(_with_effect(start, cand, cand.start_values({})),
-                                   {**fleet_values(res.unit_values, params), **res.shared_values})
-        v_after = held_velocity(heldout_models(res.unit_models, final_model, held_sets))
-        eff_params = dict(effect_parameters(final_model.effect(chosen)))
+        v_after, g_after, eff_params = v_recal, g_recal, {}
+    total = g_recal - g_after
+    members = [dataclasses.replace(m, share=((m.gap_before - m.gap_after) / total if total > 0 else float("nan")))
+               for m in members]
     fleet_models = {k: (base.unit_models.get(k, fleet0)) for k in held_sets}
     levels = sample_levels(held, fleet_models,
                            lambda fi: NO_UNIT if held.unit_ids[fi] is None else held.unit_ids[fi])
@@ -667,7 +936,40 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     if not maps["recalibrated"].score > SIGNIFICANT_SCORE:
         region = (f"no significant disagreement (misfit score {maps['recalibrated'].score:.2g} over the held-out "
                   f"curve, noise gives about 1); largest local misfit: {region}")
-    say(f"decision: {chosen}; held-out gap {g_before:.3f} -> {g_recal:.3f} (recalibrated) -> {g_after:.3f} mm/s")
+
+    # Verdict: what remains after the set is compared with what healthy data of a plausible but
+    # different model leaves (thresholds calibrated on the altsim, docs/discrepancy.md).
+    # A disagreement can also hide in the parameters: values of the final fit still far outside the
+    # manufacturing dispersion (absorbed_z sigmas) are a disagreement that the set does not explain.
+    final_flags = absorbing_parameters(final_fit.unit_values, start, z_max=config.absorbed_z)
+    remains = (g_after >= config.unexplained_ratio * floor and maps["augmented"].score >= config.unexplained_score)
+    verdict = "unexplained" if (remains or final_flags) else ("effect" if members else "none")
+    unexplained = None
+    probe = None
+    if verdict == "unexplained":
+        unexplained = describe_remainder(maps["augmented"], g_after, floor)
+        if final_flags:
+            unexplained += ("; absorbed by the recalibration: " + "; ".join(
+                f"unit {f.unit} {f.path} {f.z:+.1f} sigma" for f in final_flags))
+        say(f"unexplained: {unexplained}")
+        probe_fit, probe_model, v_probe = final_fit, final_model, v_after
+        if final_flags:
+            # Expose what the parameters absorb: refit without them (held at the input model's values).
+            absorbed = tuple(sorted({f.path for f in final_flags}))
+            keep = tuple(p for p in cur["params"] if p.path not in absorbed)
+            units = {k: apply_values(final_model, {**final_fit.unit_values[k],
+                                                   **{a: float(start.get(a)) for a in absorbed}}) for k in fit_sets}
+            probe_fit = fit_joint(units, fit_sets, keep, max_iterations=cal.max_iterations)
+            probe_model = apply_values(final_model, {**fleet_values(probe_fit.unit_values, keep),
+                                                     **{a: float(start.get(a)) for a in absorbed}})
+            v_probe = held_velocity(heldout_models(probe_fit.unit_models, probe_model, held_sets))
+        v_fit = rp.replay_batch([probe_fit.unit_models[k] for k in fit_sets], list(fit_sets.values()))
+        probe = sparse_probe(merge_sets(list(fit_sets.values())), np.concatenate(v_fit), held, v_probe,
+                             curve=cal.curve)
+        say(f"sparse probe: {', '.join(probe.terms) or 'no term'} close {100 * probe.gap_closed:.0f} % of the "
+            f"held-out gap")
+    say(f"verdict: {verdict}; set: {[m.effect for m in members]}; held-out gap {g_before:.3f} -> {g_recal:.3f} "
+        f"(recalibrated) -> {g_after:.3f} mm/s (noise floor {floor:.3f})")
     return DiscrepancyResult(
         effect=chosen, parameters=eff_params, region=region, gap_metric=gap_metric_text(cal.curve),
         gap_before=g_before, gap_recalibrated=g_recal, gap_after=g_after, gap_floor=floor, ranking=ranking,
@@ -676,8 +978,10 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         v_heldout={"input": v_input, "recalibrated": v_recal, "augmented": v_after},
         fit_flights=tuple(f.flight_id for f in fit_flights), heldout_flights=tuple(f.flight_id for f in held_flights),
         decision_rule=config.decision_rule, frame_s=frame_s, n2_measured=held.n2_measured,
-        seconds=time.perf_counter() - t_start, curve=cal.curve)
+        seconds=time.perf_counter() - t_start, curve=cal.curve, verdict=verdict, effect_set=tuple(members),
+        equivalents=tuple(equivalents), flags=flags, unexplained=unexplained, probe=probe)
 
 
-__all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "NoiseModel", "decide",
+__all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
+           "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
            "correlation_time", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout"]

@@ -302,7 +302,10 @@ def merge_sets(sets: Sequence[rp.ReplaySet]) -> rp.ReplaySet:
         moving=cat("moving"), position_mm=cat("position_mm"),
         flight=np.concatenate([s.flight + o for s, o in zip(sets, flight_off)]), phase=cat("phase"),
         flight_ids=tuple(x for s in sets for x in s.flight_ids), unit_ids=tuple(x for s in sets for x in s.unit_ids),
-        n2_measured=all(s.n2_measured for s in sets), config=sets[0].config)
+        n2_measured=all(s.n2_measured for s in sets), config=sets[0].config, time_s=cat("time_s"),
+        fuel_temp_degc=cat("fuel_temp_degc"),
+        flight_fuel_temp_degc=(None if any(s.flight_fuel_temp_degc is None for s in sets)
+                               else tuple(x for s in sets for x in s.flight_fuel_temp_degc)))
 
 
 def recalibrate(flights, model=None, *, parameters: Sequence[FitParameter] = RECALIBRATION_PARAMETERS,

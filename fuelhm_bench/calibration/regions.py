@@ -94,15 +94,25 @@ class RegionMap:
                 return lv
         return None
 
-    def ranked(self, *, min_share: float = 0.05) -> list[RegionLevel]:
-        """Levels by decreasing misfit score, among those with at least ``min_share`` of the samples."""
+    def ranked(self, *, min_share: float = 0.05, by: str = "local_gap") -> list[RegionLevel]:
+        """Levels among those with at least ``min_share`` of the samples, most disagreeing first.
+
+        ``by="local_gap"`` (default) ranks the levels whose misfit score is significant (above
+        the overall score's noise level, 3) by their local gap -- *where the gap is* -- then the
+        others by score; ``by="score"`` ranks by misfit score only.
+        """
         ok = [lv for lv in self.levels if lv.count >= min_share * max(self.count, 1) and np.isfinite(lv.score)]
-        return sorted(ok, key=lambda lv: -lv.score)
+        if by == "score":
+            return sorted(ok, key=lambda lv: -lv.score)
+        sig = [lv for lv in ok if lv.score > 3.0 and np.isfinite(lv.local_gap_mm_s)]
+        rest = [lv for lv in ok if lv not in sig]
+        return sorted(sig, key=lambda lv: -lv.local_gap_mm_s) + sorted(rest, key=lambda lv: -lv.score)
 
     def concentration(self, *, min_share: float = 0.05, n_top: int = 2) -> str:
         """Name of the region(s) where the disagreement concentrates.
 
-        The ``n_top`` levels (one per factor at most) with the largest misfit score, e.g.
+        The ``n_top`` levels (one per factor at most) first in :meth:`ranked` (largest local gap
+        among the significant levels), e.g.
         ``"current band: null region (score 41 vs 12 overall, local gap 0.52 mm/s)"``.
         """
         seen, names = set(), []

@@ -177,6 +177,12 @@ class ReplaySet:
         Whether N2 came from the file (else ``ReplayConfig.n2_default_pct``).
     config : ReplayConfig
         The configuration used.
+    time_s : numpy.ndarray or None
+        Time in flight of every sample [s] (for the sparse probe of the discrepancy workflow).
+    fuel_temp_degc : numpy.ndarray or None
+        Fuel temperature [degC], when the file has ``fuel_temp_degC``.
+    flight_fuel_temp_degc : tuple of float or None
+        Mean fuel temperature of each whole flight [degC] (the simulator's per-flight value).
     """
 
     frame_s: float
@@ -197,6 +203,9 @@ class ReplaySet:
     unit_ids: tuple
     n2_measured: bool
     config: ReplayConfig = field(default_factory=ReplayConfig)
+    time_s: np.ndarray | None = None
+    fuel_temp_degc: np.ndarray | None = None
+    flight_fuel_temp_degc: tuple | None = None
 
     @property
     def n_frames(self) -> int:
@@ -344,6 +353,7 @@ def prepare_replay(flights, *, config: ReplayConfig = ReplayConfig(), stroke_m: 
         n2_pct = np.asarray(f.extras["n2_pct"], dtype=float) if n2_measured else np.full(f.n_samples,
                                                                                           cfg.n2_default_pct)
         phase = f.extras.get("phase")
+        temp = f.extras.get("fuel_temp_degC")
         i_lo, i_hi = float(np.min(f.current_ma)), float(np.max(f.current_ma))
         for a, b in _runs(np.asarray(f.time_s), frame_s, cfg):
             r = _run_samples(f, a, b, frame_s, stroke_mm, cfg, n2_pct, i_lo, i_hi)
@@ -365,6 +375,8 @@ def prepare_replay(flights, *, config: ReplayConfig = ReplayConfig(), stroke_m: 
                         "kind": kind, "flight": fi, "scored": scored, "n_scored": int(scored.sum()), "cells": cells,
                         "cur": r["cur"][s0:s1], "pos": r["pos"][s0:s1], "n2": r["n2"][s0:s1],
                         "phase": None if phase is None else np.asarray(phase[a:b], dtype=object)[s0:s1],
+                        "time": np.asarray(f.time_s, dtype=float)[a:b][s0:s1],
+                        "temp": None if temp is None else np.asarray(temp[a:b], dtype=float)[s0:s1],
                     })
     if not pieces:
         raise DataFormatError(
@@ -471,7 +483,11 @@ def _assemble(pieces: list[dict], flights, frame_s: float, cfg: ReplayConfig, n2
         lengths=lengths, scored=scored, v_meas_mm_s=v, i_ma=i_m, direction=direction, moving=moving & scored,
         position_mm=pos, flight=flight, phase=phase,
         flight_ids=tuple(f.flight_id for f in flights), unit_ids=tuple(f.unit_id for f in flights),
-        n2_measured=n2_measured, config=cfg)
+        n2_measured=n2_measured, config=cfg, time_s=np.concatenate([p["time"] for p in pieces]),
+        fuel_temp_degc=(np.concatenate([p["temp"] for p in pieces]) if all(p["temp"] is not None for p in pieces)
+                        else None),
+        flight_fuel_temp_degc=(tuple(float(np.nanmean(f.extras["fuel_temp_degC"])) for f in flights)
+                               if all("fuel_temp_degC" in f.extras for f in flights) else None))
 
 
 # --------------------------------------------------------------------------- model side
@@ -532,6 +548,19 @@ def _sensor_windowed(v_rod, starts, lengths, b, a, zi0, w, h, out):  # pragma: n
             out[s + h + j] = acc
 
 
+def _temperature_groups(model, rs):
+    """Frames of a set replayed together: all (``(None, None)``), or, with ``viscosity_temperature``
+    and a fuel temperature in the data, the frames of each flight, replayed at the flight's mean
+    temperature (the simulator holds one temperature per flight)."""
+    if model.effect("viscosity_temperature") is None or rs.flight_fuel_temp_degc is None:
+        return [(None, None)]
+    out = []
+    for fi in np.unique(rs.flight):
+        t = rs.flight_fuel_temp_degc[fi]
+        out.append((np.flatnonzero(rs.flight == fi), t if np.isfinite(t) else 20.0))
+    return out
+
+
 def replay_batch(models, sets) -> list[np.ndarray]:
     """Replay several (model, sample set) pairs in one simulator call.
 
@@ -555,22 +584,34 @@ def replay_batch(models, sets) -> list[np.ndarray]:
     NumericalError
         If the simulator fails.
     """
-    inputs = []
-    for model, rs in zip(models, sets):
+    inputs, run_models, owners = [], [], []  # one simulator run per set, or per temperature bin of a set
+    for j, (model, rs) in enumerate(zip(models, sets)):
         if abs(model.controller.frame_s - rs.frame_s) > 1e-9 * rs.frame_s:
             raise range_error("LoopModel.controller.frame_s", f"equal to the data's frame ({rs.frame_s:g} s)",
                               model.controller.frame_s)
-        inputs.append(FlightInputs(np.zeros(rs.n_frames), rs.n2_frac, rs.frame_s, open_loop_current_a=rs.current_a,
-                                   end_stops=False, forced_position_m=rs.position_m))
-    outs = simulate(list(models), inputs, [np.random.default_rng(0) for _ in inputs],
-                    labels=[f"replay of set {k}" for k in range(len(inputs))])
+        for idx, temp in _temperature_groups(model, rs):
+            sel = slice(None) if idx is None else idx
+            extras = {} if temp is None else {"fuel_temp_degC": np.array([temp])}
+            inputs.append(FlightInputs(np.zeros(rs.n_frames if idx is None else idx.size), rs.n2_frac[sel],
+                                       rs.frame_s, open_loop_current_a=rs.current_a[sel], end_stops=False,
+                                       forced_position_m=rs.position_m[sel], extras=extras))
+            run_models.append(model)
+            owners.append((j, idx))
+    outs = simulate(run_models, inputs, [np.random.default_rng(0) for _ in inputs],
+                    labels=[f"replay of set {j}" for j, _ in owners])
+    v_rods = [np.empty(rs.n_frames) for rs in sets]
+    for (j, idx), out in zip(owners, outs):
+        if idx is None:
+            v_rods[j] = out.true_velocity_m_s
+        else:
+            v_rods[j][idx] = out.true_velocity_m_s
     result = []
-    for model, rs, out in zip(models, sets, outs):
+    for model, rs, v_rod in zip(models, sets, v_rods):
         num, den = sensor_rate_filter(model, rs.frame_s)
         num, den = num / den[0], den / den[0]
         zi0 = signal.lfilter_zi(num, den)
         v = np.empty(rs.n_frames)
-        _sensor_windowed(1e3 * out.true_velocity_m_s, rs.starts, rs.lengths, num, den, zi0,
+        _sensor_windowed(1e3 * v_rod, rs.starts, rs.lengths, num, den, zi0,
                          vel.window_weights(rs.config.half_width), rs.config.half_width, v)
         result.append(v)
     return result

@@ -198,8 +198,32 @@ def write_discrepancy_report(result, out_dir: str | Path, *, model_file: str, da
 def _discrepancy_markdown(result, model_file: str, data_name: str) -> str:
     r = result
     lines = [f"# Model discrepancy report{': ' + data_name if data_name else ''}", ""]
-    lines += [f"**Missing effect: `{r.effect}`**" + ("" if r.effect == "none" else
-              " (" + ", ".join(f"{k} = {v:.4g}" for k, v in r.parameters.items()) + ")"), "",
+    lines += [f"**Verdict: `{r.verdict}`**" + (f" -- {r.unexplained}" if r.unexplained else ""), "",
+              f"**Missing effect: `{r.effect}`**" + ("" if r.effect == "none" else
+              " (" + ", ".join(f"{k} = {v:.4g}" for k, v in r.parameters.items()) + ")"), ""]
+    if r.effect_set:
+        lines += ["| set member | parameters | held at nominal | held-out gap before -> after [mm/s] | share of the gap |",
+                  "|---|---|---|---|---|"]
+        for m in r.effect_set:
+            lines.append(f"| `{m.effect}` | {', '.join(f'{k}={v:.4g}' for k, v in m.parameters.items())} | "
+                         f"{', '.join(m.held) or '-'} | {m.gap_before:.3f} -> {m.gap_after:.3f} | "
+                         f"{100 * m.share:.0f} % |")
+        lines.append("")
+    for e in r.equivalents:
+        lines += [f"**Equivalent explanation:** `{e.alternative}` explains the data about as well as `{e.selected}` "
+                  f"(held-out reduction {100 * e.reduction_alternative:.0f} % vs {100 * e.reduction_selected:.0f} %, "
+                  f"dBIC {e.delta_bic:.0f}). Separating test: {e.test}.", ""]
+    if r.flags:
+        lines += ["**Recalibrated values outside the manufacturing dispersion (likely absorbing a missing effect):**",
+                  "", "| unit | parameter | value | nominal | z [sigma] |", "|---|---|---|---|---|"]
+        lines += [f"| {f.unit} | `{f.path}` | {f.value:.4g} | {f.nominal:.4g} | {f.z:+.1f} |" for f in r.flags]
+        lines.append("")
+    if r.probe is not None:
+        lines += [f"**Sparse probe of the remaining residuals:** terms "
+                  + (", ".join(f"{t} ({c:+.3g})" for t, c in zip(r.probe.terms, r.probe.coefficients)) or "none")
+                  + f"; held-out gap {r.probe.gap_before:.3f} -> {r.probe.gap_after:.3f} mm/s "
+                  f"({100 * r.probe.gap_closed:.0f} % closed).", ""]
+    lines += [
               f"**Where the recalibrated model disagrees (held-out flights):** {r.region}", "",
               "| held-out gap | mm/s |", "|---|---|",
               f"| input model | {_fmt(r.gap_before)} |", f"| recalibrated | {_fmt(r.gap_recalibrated)} |",

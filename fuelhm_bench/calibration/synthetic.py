@@ -36,6 +36,9 @@ TEST_RANGES: dict[str, tuple[str, float, float]] = {
     "rod_friction": ("coulomb_n", 150.0, 600.0),
     "lvdt_lag": ("time_constant_s", 0.01, 0.05),
     "load_stiffness": ("stiffness_n_m", 3e4, 1.5e5),
+    "current_driver_lag": ("time_constant_s", 0.01, 0.05),
+    "torque_motor_hysteresis": ("width_a", 1e-4, 6e-4),
+    "viscosity_temperature": ("leak_at_20c_m3_s_pa", 1e-12, 5e-12),
 }
 
 

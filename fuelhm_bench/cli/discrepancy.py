@@ -79,14 +79,24 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json_text(payload))
     else:
+        print(f"verdict: {result.verdict}" + (f" -- {result.unexplained}" if result.unexplained else ""))
         print(f"effect: {result.effect}")
         for k, v in result.parameters.items():
             print(f"  {k} = {v:.5g}")
+        for m in result.effect_set[1:]:
+            print(f"  + {m.effect}: " + ", ".join(f"{k} = {v:.5g}" for k, v in m.parameters.items()))
+        for e in result.equivalents:
+            print(f"equivalent: {e.alternative} (test: {e.test})")
+        for f in result.flags:
+            print(f"flag: unit {f.unit} {f.path} = {f.value:.5g} ({f.z:+.1f} sigma): likely absorbing a missing effect")
+        if result.probe is not None:
+            print("probe: " + ", ".join(f"{t} ({c:+.3g})" for t, c in zip(result.probe.terms, result.probe.coefficients))
+                  + f"; closes {100 * result.probe.gap_closed:.0f} % of the held-out gap")
         print(f"region: {result.region}")
         print(f"held-out gap: {result.gap_before:.3f} (input) -> {result.gap_recalibrated:.3f} (recalibrated) -> "
               f"{result.gap_after:.3f} mm/s ({100 * result.gap_reduction:.0f} % smaller)")
         print("ranking (BIC, dBIC vs none, held-out gap):")
         for c in result.ranking:
-            print(f"  {c.effect:18s} {c.bic:12.1f} {c.delta_bic:10.1f} {c.gap_after:8.3f}"
+            print(f"  {c.label:18s} {c.bic:12.1f} {c.delta_bic:10.1f} {c.gap_after:8.3f}"
                   f"{'  eligible' if c.eligible else ''}")
     return 0

@@ -18,6 +18,18 @@ id                      equation
                         force is within +/-F_s)
 ``lvdt_lag``            extra first-order lag ``tau`` on the measured position
 ``load_stiffness``      ``F_L += k_x (x - x_ref)`` position-dependent load
+``current_driver_lag``  coil current lags the recorded command:
+                        ``tau di_coil/dt = i_cmd - i_coil`` (the spool sees its
+                        exact mean over each frame)
+``torque_motor_``       play (backlash operator) of full width ``h`` between the
+``hysteresis``          coil current and the torque-motor torque (magnetic
+                        hysteresis of the armature): the spool command follows
+                        ``i_p = clip(i_p, i - h/2, i + h/2)``
+``viscosity_``          laminar cross-piston leak through the seal clearance,
+``temperature``         inversely proportional to the fuel viscosity
+                        ``mu(T) = mu_20 exp(-b (T - 20 degC))``:
+                        ``K_li += K_20 exp(b (T - 20))``, T the flight's
+                        ``fuel_temp_degC`` (20 degC when the data have none)
 ======================  =====================================================
 """
 
@@ -134,9 +146,74 @@ class LoadStiffness:
         check_fields(self, {"stiffness_n_m": (-5e5, 5e5, True), "reference_m": (0.0, 1.0, True)})
 
 
-Effect = SpoolOverlap | SpoolFlowForce | RodFriction | LvdtLag | LoadStiffness
+@dataclass(frozen=True)
+class CurrentDriverLag:
+    """First-order lag of the coil current behind the commanded (recorded) current.
 
-EFFECTS: dict[str, type] = {cls.id: cls for cls in (SpoolOverlap, SpoolFlowForce, RodFriction, LvdtLag, LoadStiffness)}
+    The current driver (a voltage amplifier driving the coil inductance) follows the
+    command with a time constant ``L / R``; the recorded current is the command.
+
+    Parameters
+    ----------
+    time_constant_s : float, default=0.02
+        Lag time constant tau [s], in (0, 0.5].
+    """
+
+    id: ClassVar[str] = "current_driver_lag"
+    time_constant_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"time_constant_s": (0.0, 0.5, False)})
+
+
+@dataclass(frozen=True)
+class TorqueMotorHysteresis:
+    """Magnetic hysteresis of the torque motor, as a play on the coil current.
+
+    Parameters
+    ----------
+    width_a : float, default=2e-4
+        Full width h of the play [A], in (0, 5e-3].
+    """
+
+    id: ClassVar[str] = "torque_motor_hysteresis"
+    width_a: float = 2e-4
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"width_a": (0.0, 5e-3, False)})
+
+
+@dataclass(frozen=True)
+class ViscosityTemperature:
+    """Laminar cross-piston leak whose conductance follows the fuel viscosity with temperature.
+
+    Parameters
+    ----------
+    leak_at_20c_m3_s_pa : float, default=1e-12
+        Leak conductance at 20 degC K_20 [m^3/(s Pa)], in (0, 1e-9].
+    slope_per_degc : float, default=0.02
+        Viscosity temperature coefficient b [1/degC], in [0, 0.1] (kerosene: about 0.02).
+    """
+
+    id: ClassVar[str] = "viscosity_temperature"
+    leak_at_20c_m3_s_pa: float = 1e-12
+    slope_per_degc: float = 0.02
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"leak_at_20c_m3_s_pa": (0.0, 1e-9, False), "slope_per_degc": (0.0, 0.1, True)})
+
+    def leak_coefficient(self, temp_degc: float) -> float:
+        """Leak conductance at a fuel temperature [m^3/(s Pa)]."""
+        import math
+
+        return self.leak_at_20c_m3_s_pa * math.exp(self.slope_per_degc * (temp_degc - 20.0))
+
+
+Effect = (SpoolOverlap | SpoolFlowForce | RodFriction | LvdtLag | LoadStiffness | CurrentDriverLag
+          | TorqueMotorHysteresis | ViscosityTemperature)
+
+EFFECTS: dict[str, type] = {cls.id: cls for cls in (SpoolOverlap, SpoolFlowForce, RodFriction, LvdtLag, LoadStiffness,
+                                                    CurrentDriverLag, TorqueMotorHysteresis, ViscosityTemperature)}
 assert tuple(EFFECTS) == EFFECT_IDS
 
 
@@ -209,5 +286,5 @@ def parse_effect_spec(spec: str) -> Effect:
     return make_effect(effect_id.strip(), **params)
 
 
-__all__ = ["EFFECTS", "Effect", "LoadStiffness", "LvdtLag", "RodFriction", "SpoolFlowForce", "SpoolOverlap",
+__all__ = ["CurrentDriverLag", "EFFECTS", "Effect", "TorqueMotorHysteresis", "ViscosityTemperature", "LoadStiffness", "LvdtLag", "RodFriction", "SpoolFlowForce", "SpoolOverlap",
            "effect_parameters", "make_effect", "parse_effect_spec", "NON_NEGATIVE"]

@@ -41,13 +41,13 @@ _K_NAMES = (
     "frame", "kp", "ki", "zmax", "dead_band", "isat", "dgain", "doff", "inb", "ksv", "spool_stroke",
     "rate", "half_play", "fric_num", "ff_ratio", "w_null", "w_out", "o_a", "o_b", "dps100", "faero100",
     "kx", "xref", "fc", "fs", "vs", "bv", "stroke", "noise", "quantum", "rmin", "rmax", "lagsel",
-    "direct", "endstops",
+    "direct", "endstops", "drvlag", "hyst",
 )
 K = {name: i for i, name in enumerate(_K_NAMES)}
 K_N = len(_K_NAMES)
 (K_FRAME, K_KP, K_KI, K_ZMAX, K_DB, K_ISAT, K_DGAIN, K_DOFF, K_INB, K_KSV, K_SSTROKE, K_RATE, K_HPLAY,
  K_FRICNUM, K_FF, K_WNULL, K_WOUT, K_OA, K_OB, K_DPS100, K_FAERO100, K_KX, K_XREF, K_FC, K_FS, K_VS, K_BV,
- K_STROKE, K_NOISE, K_Q, K_RMIN, K_RMAX, K_LAGSEL, K_DIRECT, K_ENDSTOPS) = range(K_N)
+ K_STROKE, K_NOISE, K_Q, K_RMIN, K_RMAX, K_LAGSEL, K_DIRECT, K_ENDSTOPS, K_DRVLAG, K_HYST) = range(K_N)
 
 #: Velocity table grid: spool positions (fraction of stroke) x N2 nodes.
 TABLE_NX = 801
@@ -65,8 +65,10 @@ STATUS_OK, STATUS_NONFINITE = 0, 1
 _SAFE_FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
 
 
-def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def pack_model(model, fuel_temp_degc: float = 20.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Flatten a :class:`~fuelhm_bench.physics.model.LoopModel` into kernel vectors.
+
+    ``fuel_temp_degc`` (the flight's fuel temperature) only matters with ``viscosity_temperature``.
 
     Returns
     -------
@@ -93,6 +95,9 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     c[cyl.C_CQC] = (cy.diaphragm_open_fraction * cy.diaphragm_discharge_coefficient * cy.diaphragm_area_m2
                     * fl.flow_constant)
     c[cyl.C_KLI] = cy.leakage_coefficient_m3_s_pa
+    vt = model.effect("viscosity_temperature")
+    if vt:
+        c[cyl.C_KLI] += vt.leak_coefficient(fuel_temp_degc)
     c[cyl.C_PR] = fl.return_pressure_pa
     c[cyl.C_PCR] = fl.regularisation_pressure_pa
     c[cyl.C_RC] = sv.corner_radius_m
@@ -138,6 +143,10 @@ def pack_model(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     k[K_LAGSEL] = 1.0 if lag else 0.0
     k[K_DIRECT] = 1.0 if (ls or rf) else 0.0
     k[K_ENDSTOPS] = 1.0
+    dl = model.effect("current_driver_lag")
+    k[K_DRVLAG] = dl.time_constant_s if dl else 0.0
+    hy = model.effect("torque_motor_hysteresis")
+    k[K_HYST] = 0.5 * hy.width_a if hy else 0.0
     lv = lvdt_discretization(model.lvdt, lag.time_constant_s if lag else 0.0, ct.frame_s)
     return c, k, lv
 
@@ -293,6 +302,11 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
     inv_n2_step = 1.0 / n2_step
     forced = x_force.shape[0] >= n
     open_loop = i_open.shape[0] >= n
+    # optional effects current_driver_lag / torque_motor_hysteresis (states: lagged and played current)
+    tdl = k[K_DRVLAG]
+    edl = math.exp(-T / tdl) if tdl > 0.0 else 0.0
+    i_lag = np.nan
+    i_play = np.nan
     for t in range(n):
         if forced and not math.isnan(x_force[t]):
             x = x_force[t]
@@ -324,7 +338,21 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
             i = i_open[t]
         n2 = n2s[t]
         dps = k[K_DPS100] * n2 * n2
-        x_c = spool_command(i, dps, k)
+        i_sv = i
+        if tdl > 0.0:  # exact mean of the lagged current over the frame, then its end value
+            if math.isnan(i_lag):
+                i_lag = i
+            i_sv = i + (i_lag - i) * tdl / T * (1.0 - edl)
+            i_lag = i + (i_lag - i) * edl
+        if k[K_HYST] > 0.0:
+            if math.isnan(i_play):
+                i_play = i_sv
+            elif i_sv > i_play + k[K_HYST]:
+                i_play = i_sv - k[K_HYST]
+            elif i_sv < i_play - k[K_HYST]:
+                i_play = i_sv + k[K_HYST]
+            i_sv = i_play
+        x_c = spool_command(i_sv, dps, k)
         dz = k[K_FRICNUM] / max(dps, 1e5)
         # 3. spool positions at the two Gauss-Legendre points of the frame and at its end
         xs0, xfb0 = x_s, x_fb

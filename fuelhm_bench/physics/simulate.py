@@ -160,7 +160,8 @@ def simulate(models: Sequence, inputs: Sequence[FlightInputs], rngs: Sequence[np
         if abs(inp.frame_s - model.controller.frame_s) > 1e-12:
             raise range_error("FlightInputs.frame_s", f"equal to the model's controller frame ({model.controller.frame_s:g} s)",
                               inp.frame_s)
-        c, k, lv = kernel.pack_model(model)
+        temp = inp.extras.get("fuel_temp_degC") if model.effect("viscosity_temperature") else None
+        c, k, lv = kernel.pack_model(model, 20.0 if temp is None else float(np.mean(temp)))
         k[kernel.K_ENDSTOPS] = 1.0 if inp.end_stops else 0.0
         cs[b], ks[b], lvs[b] = c, k, lv
         n = inp.n_frames

@@ -1,0 +1,104 @@
+"""Recalibrated parameters that likely absorb a missing effect.
+
+A unit's recalibrated value far outside the population's manufacturing dispersion
+(:class:`~fuelhm_bench.physics.model.Dispersion`) is not a manufacturing offset: the fit
+bent that parameter to mimic something the model lacks (a flow force narrowing the outer
+slot width, a supply droop inflating the aerodynamic load, ...). A health tracker reading
+such a value would report a degradation that is not there. :func:`absorbing_parameters`
+flags every (unit, parameter) whose deviation from the input model exceeds ``z_max``
+standard deviations of the dispersion (3 by default: the dispersion is truncated there).
+Parameters without a dispersion (the width transition) are never flagged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from fuelhm_bench.physics.model import Dispersion
+
+#: Deviation [dispersion sigmas] beyond which a recalibrated value is flagged.
+Z_MAX = 3.0
+
+#: Additive dispersions that shift the same feature of the curve as the parameter (the driver's
+#: offset moves the null bias seen from the recorded current).
+_ALIASED_ADDITIVE = {"servovalve.null_bias_a": ("driver.offset_a",)}
+
+
+@dataclass(frozen=True)
+class ParameterFlag:
+    """One recalibrated value outside the manufacturing dispersion.
+
+    Attributes
+    ----------
+    unit : object
+        Unit key.
+    path : str
+        Parameter path.
+    value, nominal : float
+        Recalibrated and input-model values [SI].
+    sigma : float
+        Dispersion standard deviation at the nominal value [SI].
+    z : float
+        ``(value - nominal) / sigma`` [-].
+    """
+
+    unit: object
+    path: str
+    value: float
+    nominal: float
+    sigma: float
+    z: float
+
+    def as_json(self) -> dict:
+        """JSON-ready summary."""
+        return {"unit": self.unit, "parameter": self.path, "value": self.value, "nominal": self.nominal,
+                "sigma": self.sigma, "z": self.z, "reading": "likely absorbing a missing effect"}
+
+
+def dispersion_sigma(model, path: str, dispersion: Dispersion = Dispersion()) -> float | None:
+    """Standard deviation of ``path`` over the manufactured population [SI] (None: not dispersed)."""
+    rel = dict(dispersion.relative)
+    add = dict(dispersion.additive)
+    if path in rel:
+        return abs(model.get(path)) * rel[path] * dispersion.scale
+    if path in add:
+        var = add[path] ** 2 + sum(add.get(a, 0.0) ** 2 for a in _ALIASED_ADDITIVE.get(path, ()))
+        return math.sqrt(var) * dispersion.scale
+    return None
+
+
+def absorbing_parameters(unit_values: dict, nominal_model, *, dispersion: Dispersion = Dispersion(),
+                         z_max: float = Z_MAX) -> tuple[ParameterFlag, ...]:
+    """Flag the recalibrated values outside ``z_max`` dispersion sigmas of the input model.
+
+    Parameters
+    ----------
+    unit_values : dict
+        Unit key -> {parameter path: recalibrated value} [SI].
+    nominal_model : LoopModel
+        The input model (the population's centre).
+    dispersion : Dispersion
+        Manufacturing dispersion of the population.
+    z_max : float, default=3.0
+        Threshold [sigmas].
+
+    Returns
+    -------
+    tuple of ParameterFlag
+        By decreasing ``|z|``.
+    """
+    flags = []
+    for unit, values in unit_values.items():
+        for path, value in values.items():
+            sigma = dispersion_sigma(nominal_model, path, dispersion)
+            if not sigma:
+                continue
+            nominal = nominal_model.get(path)
+            z = (float(value) - nominal) / sigma
+            if abs(z) > z_max:
+                flags.append(ParameterFlag(unit, path, float(value), nominal, sigma, z))
+    return tuple(sorted(flags, key=lambda f: -abs(f.z)))
+
+
+__all__ = ["ParameterFlag", "Z_MAX", "absorbing_parameters", "dispersion_sigma"]

@@ -1,0 +1,130 @@
+"""The discrepancy workflow on altsim data: every case of the study of ``docs/discrepancy.md``.
+
+Run as a command (it takes tens of minutes; it is not part of the test run)::
+
+    python -m fuelhm_bench.validation.study --out study.csv [--units 4 --flights 3 --minutes 10] [--cases ...]
+
+Each case simulates a fleet with :func:`~fuelhm_bench.validation.altsim.simulate_flights`
+(healthy, a library look-alike at 1/3, 1 and 2 times its reference magnitude, an effect
+outside the library, two at once), runs :func:`~fuelhm_bench.calibration.discrepancy.find_discrepancy`
+from the nominal model, and records the verdict, the set, the equivalents, the flags, the
+probe's terms, the gaps and the fitted main parameter.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass
+
+from fuelhm_bench.validation.altsim import AltEffects, simulate_flights
+
+#: Reference magnitudes of the library look-alikes (issue 14 targets) and the fitted parameter
+#: they are compared with: (altsim field, value, library effect, library parameter).
+#: The altsim flow force at 0.12 cuts the outer gains by about 12 % at ground-idle pressure.
+REFERENCE = {
+    "spool_overlap": ("overlap_m", 15e-6, "overlap_m"),
+    "lvdt_lag": ("lvdt_lag_s", 0.05, "time_constant_s"),
+    "rod_friction": ("coulomb_n", 500.0, "coulomb_n"),
+    "load_stiffness": ("load_stiffness_n_m", 3e4, "stiffness_n_m"),
+    "spool_flow_force": ("flow_force_ratio", 0.12, None),
+}
+
+
+@dataclass(frozen=True)
+class AltCase:
+    """One case: a name, the truth (library id, ``none`` or ``outside``) and the altsim effects."""
+
+    name: str
+    truth: str
+    effects: AltEffects
+    main: tuple | None = None  # (library parameter, true value)
+    seed: int = 0
+
+
+def default_cases() -> list[AltCase]:
+    """The study's cases (module docstring)."""
+    cases = [AltCase(f"healthy seed {s}", "none", AltEffects(), seed=s) for s in (0, 1, 2)]
+    for eff, (field, ref, lib_param) in REFERENCE.items():
+        for k, frac in enumerate((1 / 3, 1.0, 2.0)):
+            value = ref * frac
+            main = (lib_param, value) if lib_param else None
+            cases.append(AltCase(f"{eff} x{frac:.2g}", eff, AltEffects(**{field: value}), main, seed=10 + k))
+    cases += [
+        AltCase("current_driver_lag 30 ms", "current_driver_lag", AltEffects(driver_lag_s=0.03),
+                ("time_constant_s", 0.03), seed=20),
+        AltCase("torque_motor_hysteresis 0.3 mA", "torque_motor_hysteresis", AltEffects(hysteresis_a=3e-4),
+                ("width_a", 3e-4), seed=21),
+        AltCase("outside: supply droop 1e10 Pa s/m3", "outside", AltEffects(supply_droop_pa_s_m3=1e10), seed=30),
+        AltCase("outside: supply droop 3e10 Pa s/m3", "outside", AltEffects(supply_droop_pa_s_m3=3e10), seed=31),
+        AltCase("outside: current drift 3 mA/h", "outside", AltEffects(current_drift_a_per_h=3e-3), seed=32),
+        AltCase("outside: temperature-dependent leak", "outside", AltEffects(leak_m3_s_pa_at_20c=1e-12), seed=33),
+        AltCase("two: rod_friction 500 N + lvdt_lag 50 ms", "rod_friction+lvdt_lag",
+                AltEffects(coulomb_n=500.0, lvdt_lag_s=0.05), seed=40),
+    ]
+    return cases
+
+
+def run_case(case: AltCase, *, n_units: int, n_flights: int, minutes: float, n_jobs: int = 2) -> dict:
+    """Simulate one case and run the workflow; a flat record of the outcome."""
+    from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy
+    from fuelhm_bench.io import split_flights
+
+    frame = simulate_flights(case.effects, n_units=n_units, n_flights=n_flights, minutes=minutes, seed=case.seed)
+    flights, _ = split_flights(frame)
+    t0 = time.perf_counter()
+    r = find_discrepancy(flights, config=DiscrepancyConfig(n_jobs=n_jobs, seed=case.seed))
+    seconds = time.perf_counter() - t0
+    named = [m.effect for m in r.effect_set]
+    fitted = float("nan")
+    if case.main is not None and case.truth in named:
+        fitted = next(m for m in r.effect_set if m.effect == case.truth).parameters.get(case.main[0], float("nan"))
+    return {
+        "case": case.name, "truth": case.truth, "verdict": r.verdict, "set": "+".join(named) or "-",
+        "shares": "/".join(f"{m.share:.2f}" for m in r.effect_set) or "-",
+        "equivalents": "; ".join(f"{e.selected}~{e.alternative}" for e in r.equivalents) or "-",
+        "flags": "; ".join(f"u{f.unit}:{f.path.split('.')[-1]} {f.z:+.1f}s" for f in r.flags) or "-",
+        "probe": "; ".join(f"{t} ({c:+.3g})" for t, c in zip(r.probe.terms, r.probe.coefficients)) if r.probe else "-",
+        "probe_closed": r.probe.gap_closed if r.probe else float("nan"),
+        "true_value": case.main[1] if case.main else float("nan"), "fitted": fitted,
+        "gap_before": r.gap_before, "gap_recal": r.gap_recalibrated, "gap_after": r.gap_after, "floor": r.gap_floor,
+        "score_after": r.maps["augmented"].score, "score_recal": r.maps["recalibrated"].score,
+        "region": r.region.split(";")[0], "seconds": seconds,
+    }
+
+
+def main(argv=None) -> int:
+    """Command line: run the cases, print and write a CSV table."""
+    import pandas as pd
+
+    p = argparse.ArgumentParser(prog="python -m fuelhm_bench.validation.study", description=__doc__.splitlines()[0])
+    p.add_argument("--out", required=True, help="CSV file of the cases (refuses to overwrite without --force)")
+    p.add_argument("--units", type=int, default=4)
+    p.add_argument("--flights", type=int, default=3)
+    p.add_argument("--minutes", type=float, default=10.0)
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--cases", default="", help="comma-separated substrings of case names (default: all)")
+    p.add_argument("--force", action="store_true")
+    a = p.parse_args(argv)
+    from pathlib import Path
+
+    out = Path(a.out)
+    if out.exists() and not a.force:
+        print(f"{out} exists; refusing to overwrite it (pass --force).", file=sys.stderr)
+        return 2
+    cases = default_cases()
+    if a.cases:
+        keys = [k.strip() for k in a.cases.split(",")]
+        cases = [c for c in cases if any(k in c.name for k in keys)]
+    rows = []
+    for c in cases:
+        rec = run_case(c, n_units=a.units, n_flights=a.flights, minutes=a.minutes, n_jobs=a.jobs)
+        rows.append(rec)
+        print(" | ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in rec.values()), flush=True)
+        pd.DataFrame(rows).to_csv(out, index=False)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

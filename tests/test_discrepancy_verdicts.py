@@ -1,0 +1,121 @@
+"""Discrepancy v2 (issue 14): verdicts, flags, probe, on data from the second simulator (altsim).
+
+The end-to-end tests use flights of :mod:`fuelhm_bench.validation.altsim`, a structurally
+different simulator (second-order spool, laminar edge leaks, compressible cylinder), never the
+model under test: one small test per verdict in the default run.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy, separating_test
+from fuelhm_bench.calibration.flags import absorbing_parameters, dispersion_sigma
+from fuelhm_bench.calibration.probe import sparse_probe
+from fuelhm_bench.calibration.recalibrate import CalibrationConfig, prepare_units
+from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.io import split_flights
+from fuelhm_bench.physics.model import LoopModel
+from fuelhm_bench.validation.altsim import AltEffects, simulate_flights
+
+#: Small instances: 2 units x 2 flights of 4 min, fit frames capped, three fast candidates.
+FAST = ("spool_overlap", "lvdt_lag", "current_driver_lag")
+SMALL = DiscrepancyConfig(calibration=CalibrationConfig(fit_max_frames=16000), heldout_max_frames=60000, n_jobs=2,
+                          candidates=FAST)
+
+
+def _flights(effects=AltEffects(), seed=0, **kw):
+    frame = simulate_flights(effects, n_units=kw.pop("n_units", 2), n_flights=kw.pop("n_flights", 2),
+                             minutes=kw.pop("minutes", 4.0), seed=seed, **kw)
+    flights, rejected = split_flights(frame)
+    assert not rejected
+    return frame, flights
+
+
+def test_altsim_writes_the_measured_format_deterministically():
+    a = simulate_flights(n_units=1, n_flights=1, minutes=2.0, seed=3)
+    b = simulate_flights(n_units=1, n_flights=1, minutes=2.0, seed=3)
+    assert list(a.columns) == ["flight_id", "unit_id", "time_s", "current_mA", "position_mm", "demand_mm", "n2_pct",
+                               "fuel_temp_degC"]
+    assert a.equals(b)
+    # The loop tracks its demand and uses the whole current range (test sweep, fast moves).
+    assert np.median(np.abs(a.position_mm - a.demand_mm)) < 1.0
+    assert a.current_mA.max() > 10 and a.current_mA.min() < -10
+    c = simulate_flights(AltEffects(lvdt_lag_s=0.05), n_units=1, n_flights=1, minutes=2.0, seed=3)
+    assert not np.allclose(c.position_mm, a.position_mm)
+    with pytest.raises(ParameterError, match="AltEffects.coulomb_n"):
+        AltEffects(coulomb_n=-1.0)
+
+
+def test_flags_values_outside_the_dispersion():
+    nominal = LoopModel()
+    sigma = dispersion_sigma(nominal, "servovalve.slot_width_outer_m")
+    assert sigma == pytest.approx(0.02 * nominal.servovalve.slot_width_outer_m)
+    assert dispersion_sigma(nominal, "servovalve.transition_start") is None
+    values = {0: {"servovalve.slot_width_outer_m": nominal.servovalve.slot_width_outer_m * 0.8,
+                  "servovalve.slot_width_null_m": nominal.servovalve.slot_width_null_m * 1.03,
+                  "servovalve.transition_start": 0.5},
+              1: {"servovalve.slot_width_outer_m": nominal.servovalve.slot_width_outer_m * 1.01}}
+    flags = absorbing_parameters(values, nominal)
+    assert [(f.unit, f.path) for f in flags] == [(0, "servovalve.slot_width_outer_m")]
+    assert flags[0].z == pytest.approx(-10.0)
+    assert flags[0].as_json()["reading"] == "likely absorbing a missing effect"
+
+
+def test_separating_tests_are_symmetric():
+    assert separating_test("lvdt_lag", "current_driver_lag") == separating_test("current_driver_lag", "lvdt_lag")
+    assert "coil current" in separating_test("lvdt_lag", "current_driver_lag")
+    assert "load_stiffness" in separating_test("load_stiffness", "rod_friction") or "residual maps" in \
+        separating_test("load_stiffness", "rod_friction")
+
+
+def test_sparse_probe_finds_a_time_drift_in_the_residuals():
+    _, flights = _flights(n_units=1, n_flights=2, minutes=3.0, seed=4)
+    model = LoopModel()
+    sets = prepare_units(flights, model, CalibrationConfig(), frame_s=0.01, max_frames=None, seed=0)
+    rs = next(iter(sets.values()))
+    # A synthetic "model" whose velocity misses a drift of 4 mm/s per hour of flight plus noise-free data.
+    rng = np.random.default_rng(0)
+    v_model = rs.v_meas_mm_s - 4.0 * rs.time_s / 3600.0 * 60.0 - 0.01 * rng.standard_normal(rs.n_frames)
+    res = sparse_probe(rs, v_model, rs, v_model, max_terms=3)
+    assert res.terms[0] == "time in flight"
+    assert res.coefficients[0] == pytest.approx(240.0, rel=0.05)
+    assert res.gap_closed > 0.9
+
+
+def test_verdict_none_on_healthy_altsim_data():
+    _, flights = _flights(seed=0)
+    r = find_discrepancy(flights, config=SMALL)
+    assert r.verdict == "none", (r.unexplained, [(c.label, round(c.delta_bic), round(c.gap_reduction, 2))
+                                                 for c in r.ranking])
+    assert r.effect == "none" and r.effect_set == () and r.probe is None
+
+
+def test_verdict_effect_names_an_lvdt_lag_of_altsim_data():
+    _, flights = _flights(AltEffects(lvdt_lag_s=0.05), seed=11)
+    r = find_discrepancy(flights, config=SMALL)
+    assert r.verdict == "effect", r.unexplained
+    assert r.effect_set[0].effect == "lvdt_lag", [(c.label, round(c.delta_bic), round(c.gap_reduction, 2))
+                                                  for c in r.ranking]
+    assert r.parameters["time_constant_s"] == pytest.approx(0.05, rel=0.25)
+    assert r.effect_set[0].share == pytest.approx(1.0) or len(r.effect_set) > 1
+
+
+def test_verdict_unexplained_on_an_effect_outside_the_library():
+    # A supply-pressure droop under flow: no library effect; the recalibration absorbs it into the
+    # outer slot width and the aerodynamic load (far outside their dispersion).
+    _, flights = _flights(AltEffects(supply_droop_pa_s_m3=4e10), seed=31)
+    r = find_discrepancy(flights, config=SMALL)
+    assert r.verdict == "unexplained", [(c.label, round(c.delta_bic), round(c.gap_reduction, 2)) for c in r.ranking]
+    # Never a single confident wrong library effect.
+    assert r.effect_set == () or r.verdict != "effect"
+    assert {f.path for f in r.flags} & {"servovalve.slot_width_outer_m", "load.aero_force_at_100pct_n"}
+    assert "absorbed by the recalibration" in r.unexplained and "largest local gaps" in r.unexplained
+    assert r.probe is not None and r.probe.terms and r.probe.gap_closed > 0.2
+    out = json.loads(json.dumps(r.as_json(), default=float))
+    assert out["verdict"] == "unexplained" and out["set"] == []
+    assert out["flags"] and out["flags"][0]["reading"] == "likely absorbing a missing effect"
+    assert out["probe"]["terms"][0]["term"] == r.probe.terms[0]
