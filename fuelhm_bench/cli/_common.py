@@ -7,7 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from fuelhm_bench.errors import OutputPathError
+from fuelhm_bench.io.outputs import check_output_dir as _check_output_dir
+from fuelhm_bench.io.outputs import check_output_path
 
 
 def positive_int(text: str) -> int:
@@ -51,31 +52,11 @@ def progress_bar(total: int, desc: str, unit: str = "flight"):
     return tqdm(total=total, desc=desc, unit=unit, disable=bool(disable), file=sys.stderr)
 
 
-def check_output(path: str | Path, *, force: bool) -> Path:
-    """Check an output file path: refuse to overwrite without ``--force``, create parents."""
-    path = Path(path)
-    if path.exists() and path.is_dir():
-        raise OutputPathError(f"{path} is a directory; give a file name.")
-    if path.exists() and not force:
-        raise OutputPathError(f"{path} exists; refusing to overwrite it (pass --force).")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputPathError(f"Cannot create the directory of {path}: {exc.strerror or exc}.") from None
-    if not os.access(path.parent, os.W_OK):
-        raise OutputPathError(f"Cannot write to {path.parent} (permission denied).")
-    return path
+def check_output(path: str | Path, *, force: bool, option: str = "--out") -> Path:
+    """Check an output file given on the command line (see :func:`fuelhm_bench.io.outputs.check_output_path`)."""
+    return check_output_path(path, overwrite=force, option=option)
 
 
-def check_output_dir(path: str | Path) -> Path:
-    """Create an output directory (existing files inside are only replaced by name)."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise OutputPathError(f"{path} exists and is not a directory.")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputPathError(f"Cannot create the output directory {path}: {exc.strerror or exc}.") from None
-    if not os.access(path, os.W_OK):
-        raise OutputPathError(f"Cannot write to {path} (permission denied).")
-    return path
+def check_output_dir(path: str | Path, *, force: bool = True, names=(), option: str = "--out") -> Path:
+    """Create an output directory (see :func:`fuelhm_bench.io.outputs.check_output_dir`)."""
+    return _check_output_dir(path, force=force, names=names, option=option)
