@@ -60,3 +60,37 @@ def check_output(path: str | Path, *, force: bool, option: str = "--out") -> Pat
 def check_output_dir(path: str | Path, *, force: bool = True, names=(), option: str = "--out") -> Path:
     """Create an output directory (see :func:`fuelhm_bench.io.outputs.check_output_dir`)."""
     return _check_output_dir(path, force=force, names=names, option=option)
+
+
+def extraction_config(flight):
+    """The indicator extraction configuration of one recorded flight.
+
+    The default (:class:`~fuelhm_bench.indicators.ExtractionConfig`), except for
+    flights recorded on a virtual bench without end stops (every sample's
+    ``phase`` is :data:`fuelhm_bench.io.BENCH_PHASE`, as ``fuelhm-bench sweep``
+    writes): their rod travels beyond the 0-60 mm stroke, so the end stops are
+    placed beyond the observed positions and the end-stop mask keeps every sample.
+
+    Parameters
+    ----------
+    flight : fuelhm_bench.io.FlightArrays
+        The flight.
+
+    Returns
+    -------
+    ExtractionConfig
+    """
+    import dataclasses
+
+    import numpy as np
+
+    from fuelhm_bench.indicators import ExtractionConfig
+    from fuelhm_bench.io import BENCH_PHASE
+
+    config = ExtractionConfig()
+    phase = flight.extras.get("phase")
+    if phase is None or not np.all(phase == BENCH_PHASE):
+        return config
+    margin = 2.0 * config.end_stop_margin_mm + 1.0
+    x = flight.position_mm
+    return dataclasses.replace(config, stroke_limits_mm=(float(x.min()) - margin, float(x.max()) + margin))

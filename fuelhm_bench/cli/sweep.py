@@ -12,8 +12,9 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="velocity-gain sweep of a model (paper section IV.B)",
                        description="Ramp the current slowly from the lower to the upper saturation and back, "
                                    "open loop, on a virtual bench without end stops, and write the result in the "
-                                   "DATA.md format (one flight; the rod position is the true one of the virtual "
-                                   "bench, and the true velocity is in an extra 'velocity_true_mm_s' column).")
+                                   "flight format (one flight; the rod position is the true one of the virtual "
+                                   "bench, phase 'bench_sweep' marks it, and the true velocity is in an extra "
+                                   "'velocity_true_mm_s' column).")
     p.add_argument("--min-ma", type=float, default=-12.0, help="lowest current [mA] (default -12)")
     p.add_argument("--max-ma", type=float, default=12.0, help="highest current [mA] (default 12)")
     p.add_argument("--ramp-seconds", type=positive_float, default=60.0, help="duration of each one-way ramp [s]")
@@ -33,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from fuelhm_bench.flights.sweep import VelocityGainSweep, run_sweep
-    from fuelhm_bench.io import write_flights
+    from fuelhm_bench.io import BENCH_PHASE, write_flights
 
     model = model_from_args(args)
     model = model.degraded(dict(parse_degrade(s) for s in args.degrade))
@@ -53,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
         "position_mm": out.true_position_m * 1e3,
         "n2_pct": np.full(n, args.n2_pct),
         "velocity_true_mm_s": out.true_velocity_m_s * 1e3,
+        # Declares the bench without end stops (rule F6 of fuelhm_bench.io.flights; no end-stop mask).
+        "phase": np.full(n, BENCH_PHASE, dtype=object),
     })
     write_flights(frame, out_path, overwrite=args.force)
     print(f"wrote a {n}-sample velocity-gain sweep to {out_path}")
