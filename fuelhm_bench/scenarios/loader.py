@@ -322,7 +322,10 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     deep_line = _bracket_depth_line(text)
     if deep_line is not None:
         raise _fail(source, deep_line, f"nested at most {MAX_DEPTH} levels deep", "brackets nested deeper")
-    loader = _BoundedLoader(text)
+    try:
+        loader = _BoundedLoader(text)
+    except yaml.YAMLError as exc:  # e.g. a control character the YAML reader refuses
+        raise _fail(source, None, f"well-formed YAML ({exc})".replace("\n", " "), "unreadable text") from None
     try:
         try:
             root = loader.get_single_node()
