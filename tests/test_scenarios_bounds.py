@@ -187,3 +187,14 @@ def test_probability_sum_without_a_shipped_baseline_blames_the_largest_excess():
     (problem,) = info.value.problems
     assert problem.field == "degradations[0].probability"
     assert "alone sum to 1.3 > 1" in str(info.value)
+
+
+def test_validate_command_refuses_the_bomb_with_one_message(tmp_path, capsys):
+    from fuelhm_bench.cli import main
+
+    path = tmp_path / "lol.yaml"
+    path.write_text(billion_laughs())
+    assert main(["validate", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert f"INVALID {path}" in out and "once its aliases (*name) are expanded" in out
+    assert len(out) < 2000

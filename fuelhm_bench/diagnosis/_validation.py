@@ -10,7 +10,6 @@ import pandas as pd
 
 from fuelhm_bench.errors import (  # noqa: F401 (NotFittedError re-exported)
     DataFormatError,
-    FuelHMError,
     NotFittedError,
     OutputPathError,
     ParameterError,
