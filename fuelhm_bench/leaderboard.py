@@ -191,11 +191,10 @@ class LeaderboardConfig:
         allowed = {"methods", "scenarios", "seeds", "scale", "timeout_s", "fidelity"}
         for key in data:
             if key not in allowed:
-                import difflib
+                from fuelhm_bench.errors import did_you_mean
 
-                close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
                 raise ScenarioError(f"{path}: unknown key '{key}'. Allowed: {', '.join(sorted(allowed))}."
-                                    + (f" Did you mean '{close[0]}'?" if close else ""))
+                                    + did_you_mean(str(key), sorted(allowed)))
         methods = []
         for i, m in enumerate(data.get("methods") or []):
             if isinstance(m, str):

@@ -31,7 +31,7 @@ def test_validate_mixed_files_exit_1_and_print_every_error(capsys):
     assert main(["validate", str(good), str(bad), "paper_2012"]) == 1
     out = capsys.readouterr().out
     assert f"OK      {good}" in out and f"INVALID {bad}" in out
-    assert f"{bad}:7: fleet.units must be an integer >= 1. Got 0 instead." in out
+    assert f"{bad}:7: fleet.units must be an integer in [1, 10000]. Got 0 instead." in out
     assert f"{bad}:16: sensor.adc_bits" in out and f"{bad}:25: degradations[1].mode" in out
     assert "2 valid, 1 invalid" in out
 

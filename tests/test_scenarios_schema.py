@@ -63,8 +63,8 @@ def test_fields_are_keyword_only_and_normalised():
 
 
 @pytest.mark.parametrize("cls, kwargs, field, allowed", [
-    (FleetSpec, {"units": True, "flights_per_unit": 3}, "units", "an integer >= 1"),
-    (FleetSpec, {"units": 2, "flights_per_unit": 3.0}, "flights_per_unit", "an integer >= 1"),
+    (FleetSpec, {"units": True, "flights_per_unit": 3}, "units", "an integer in [1, 10000]"),
+    (FleetSpec, {"units": 2, "flights_per_unit": 3.0}, "flights_per_unit", "an integer in [1, 10000]"),
     (FleetSpec, {"units": 2, "flights_per_unit": 3, "dispersion_scale": float("nan")}, "dispersion_scale",
      "a number in [0, 10]"),
     (SensorSpec, {"noise_std_um": -1.0}, "noise_std_um", "a number >= 0"),

@@ -68,6 +68,7 @@ def test_shipped_scenario_spells_out_every_field(name):
         return out
 
     full = scenario.to_dict()
+    del full["run_budget_flight_hours"]  # a run-size opt-in, not data: it changes no simulation or score
     if scenario.simultaneous:
         del full["healthy_probability"]  # must be omitted then
     assert missing(full, raw, "") == []

@@ -42,8 +42,68 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _is_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` is, or wraps, a Ctrl-C.
+
+    An interrupt that arrives while numba-compiled code runs surfaces, when the
+    call returns, as ``SystemError: CPUDispatcher(...) returned a result with an
+    exception set`` whose cause is the ``KeyboardInterrupt``.
+    """
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+_INTERRUPTED = {"seen": False}
+
+
+def _on_sigint(signum, frame) -> None:  # pragma: no cover - exercised by a subprocess test
+    _INTERRUPTED["seen"] = True
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``fuelhm-bench`` console script."""
+    """Entry point of the ``fuelhm-bench`` console script.
+
+    Exit status: 0 on success, 1 for a command's own negative answer (e.g.
+    ``validate`` found invalid files), 2 for bad input (one ``error: ...`` line
+    naming the file, field or option; argparse usage errors too), 130 on Ctrl-C
+    (one line; outputs are written atomically, so no partial file is left that
+    looks complete).
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, _on_sigint)
+    else:  # pragma: no cover - signals can only be handled in the main thread
+        previous = None
+    _INTERRUPTED["seen"] = False
+    try:
+        return _run(argv)
+    except KeyboardInterrupt:
+        return _interrupted()
+    except SystemError as exc:
+        if _INTERRUPTED["seen"] or _is_interrupt(exc):
+            return _interrupted()
+        raise
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _interrupted() -> int:
+    print("fuelhm-bench: interrupted (Ctrl-C); no partial output was published.", file=sys.stderr)
+    return 130
+
+
+def _run(argv: list[str] | None) -> int:
+    from fuelhm_bench.cli._common import option_message
+
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -54,11 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     except FuelHMError as exc:
         if args.debug:
             raise
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {option_message(str(exc), args)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from pathlib import Path
 
-from fuelhm_bench.errors import OutputPathError
+from fuelhm_bench.io.outputs import check_output_dir as _check_output_dir
+from fuelhm_bench.io.outputs import check_output_path
 
 
 def positive_int(text: str) -> int:
@@ -43,6 +45,65 @@ def positive_float(text: str) -> float:
     return value
 
 
+def bounded(kind: type, low: float | None = None, high: float | None = None, unit: str = ""):
+    """argparse type: a finite ``kind`` (int or float) in ``[low, high]``, with a message naming the range.
+
+    Examples
+    --------
+    >>> bounded(float, 2, 1440, "min")("30")
+    30.0
+    >>> bounded(int, 1, 10)("0")
+    Traceback (most recent call last):
+    argparse.ArgumentTypeError: must be an integer in [1, 10]. Got 0 instead.
+    """
+    noun = "an integer" if kind is int else "a number"
+    if low is not None and high is not None:
+        rng = f" in [{low:g}, {high:g}]"
+    elif low is not None:
+        rng = f" >= {low:g}"
+    else:
+        rng = f" <= {high:g}" if high is not None else ""
+    allowed = f"{noun}{rng}{' ' + unit if unit else ''}"
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {allowed}. Got '{text}' instead.") from None
+        if value != value or value in (float("inf"), float("-inf")) or (low is not None and value < low) or (
+                high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"must be {allowed}. Got {text} instead.")
+        return value
+
+    parse.__name__ = f"{noun} {rng.strip()}"  # argparse names the type in some messages
+    return parse
+
+
+def check_run_budget(units: int, flights: int, minutes: float, frame_rate_hz: float = 100.0) -> None:
+    """Refuse a simulation above the run budget (flight-hours), with its estimate.
+
+    The budget and its opt-in are those of scenarios
+    (:func:`fuelhm_bench.scenarios.run_budget`: ``FUELHM_RUN_BUDGET_FLIGHT_HOURS``).
+
+    Raises
+    ------
+    ParameterError
+        Naming --units, --flights and --minutes, the estimate and how to allow it.
+    """
+    import math
+
+    from fuelhm_bench.errors import ParameterError
+    from fuelhm_bench.scenarios import RUN_BUDGET_ENV, RunCost, run_budget
+
+    cost = RunCost(flight_hours=units * flights * minutes / 60.0, frame_rate_hz=frame_rate_hz)
+    budget, origin = run_budget(None)
+    if cost.flight_hours > budget:
+        raise ParameterError(
+            f"--units {units} x --flights {flights} x --minutes {minutes:g} is {cost.flight_hours:.4g} flight-hours "
+            f"({cost.describe()}), above the run budget of {budget:g} flight-hours ({origin}). To allow it, set "
+            f"{RUN_BUDGET_ENV}={math.ceil(cost.flight_hours)}.")
+
+
 def progress_bar(total: int, desc: str, unit: str = "flight"):
     """A tqdm progress bar on stderr, silent when stderr is not a terminal or in CI."""
     from tqdm.auto import tqdm
@@ -51,31 +112,143 @@ def progress_bar(total: int, desc: str, unit: str = "flight"):
     return tqdm(total=total, desc=desc, unit=unit, disable=bool(disable), file=sys.stderr)
 
 
-def check_output(path: str | Path, *, force: bool) -> Path:
-    """Check an output file path: refuse to overwrite without ``--force``, create parents."""
-    path = Path(path)
-    if path.exists() and path.is_dir():
-        raise OutputPathError(f"{path} is a directory; give a file name.")
-    if path.exists() and not force:
-        raise OutputPathError(f"{path} exists; refusing to overwrite it (pass --force).")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputPathError(f"Cannot create the directory of {path}: {exc.strerror or exc}.") from None
-    if not os.access(path.parent, os.W_OK):
-        raise OutputPathError(f"Cannot write to {path.parent} (permission denied).")
-    return path
+def check_output(path: str | Path, *, force: bool, option: str = "--out") -> Path:
+    """Check an output file given on the command line (see :func:`fuelhm_bench.io.outputs.check_output_path`)."""
+    return check_output_path(path, overwrite=force, option=option)
 
 
-def check_output_dir(path: str | Path) -> Path:
-    """Create an output directory (existing files inside are only replaced by name)."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise OutputPathError(f"{path} exists and is not a directory.")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputPathError(f"Cannot create the output directory {path}: {exc.strerror or exc}.") from None
-    if not os.access(path, os.W_OK):
-        raise OutputPathError(f"Cannot write to {path} (permission denied).")
-    return path
+def check_output_dir(path: str | Path, *, force: bool = True, names=(), option: str = "--out") -> Path:
+    """Create an output directory (see :func:`fuelhm_bench.io.outputs.check_output_dir`)."""
+    return _check_output_dir(path, force=force, names=names, option=option)
+
+
+def extraction_config(flight):
+    """The indicator extraction configuration of one recorded flight.
+
+    The default (:class:`~fuelhm_bench.indicators.ExtractionConfig`), except for
+    flights recorded on a virtual bench without end stops (every sample's
+    ``phase`` is :data:`fuelhm_bench.io.BENCH_PHASE`, as ``fuelhm-bench sweep``
+    writes): their rod travels beyond the 0-60 mm stroke, so the end stops are
+    placed beyond the observed positions and the end-stop mask keeps every sample.
+
+    Parameters
+    ----------
+    flight : fuelhm_bench.io.FlightArrays
+        The flight.
+
+    Returns
+    -------
+    ExtractionConfig
+    """
+    import dataclasses
+
+    import numpy as np
+
+    from fuelhm_bench.indicators import ExtractionConfig
+    from fuelhm_bench.io import BENCH_PHASE
+
+    config = ExtractionConfig()
+    phase = flight.extras.get("phase")
+    if phase is None or not np.all(phase == BENCH_PHASE):
+        return config
+    margin = 2.0 * config.end_stop_margin_mm + 1.0
+    x = flight.position_mm
+    return dataclasses.replace(config, stroke_limits_mm=(float(x.min()) - margin, float(x.max()) + margin))
+
+
+# ----------------------------------------------------------------------------- option names in messages
+def _same(v: float) -> float:
+    return v
+
+
+def _inverse(v: float) -> float:
+    return 1.0 / v if v else float("inf")
+
+
+#: Internal parameter names -> (command-line option, internal value -> option value, option unit,
+#: decreasing). Errors of the lower layers name internal fields (``MissionProfile.duration_s``); the
+#: command line rewrites them to name the option the user typed (``--minutes``), in its unit.
+FIELD_OPTIONS: dict[str, tuple] = {
+    "MissionProfile.duration_s": ("--minutes", lambda v: v / 60.0, "min", False),
+    "MissionProfile.frame_s": ("--frame-rate", _inverse, "Hz", True),
+    "ControllerParams.frame_s": ("--frame-rate", _inverse, "Hz", True),
+    "FlightInputs.frame_s": ("--frame-rate", _inverse, "Hz", True),
+    "VelocityGainSweep.frame_s": ("--frame-rate", _inverse, "Hz", True),
+    "LvdtParams.noise_std_m": ("--noise-um", lambda v: v * 1e6, "um", False),
+    "LvdtParams.adc_bits": ("--adc-bits", _same, "", False),
+    "Dispersion.scale": ("--dispersion", _same, "", False),
+    "FleetConfig.n_units": ("--units", _same, "", False),
+    "FleetConfig.n_flights": ("--flights", _same, "", False),
+    "FleetConfig.seed": ("--seed", _same, "", False),
+    "ModeSchedule.ramp_flights": ("--ramp-flights", _same, "", False),
+    "VelocityGainSweep.current_min_a": ("--min-ma", lambda v: v * 1e3, "mA", False),
+    "VelocityGainSweep.current_max_a": ("--max-ma", lambda v: v * 1e3, "mA", False),
+    "VelocityGainSweep.ramp_duration_s": ("--ramp-seconds", _same, "s", False),
+    "VelocityGainSweep.n2_frac": ("--n2-pct", lambda v: v * 100.0, "%", False),
+    "VelocityGainSweep.cycles": ("--cycles", _same, "", False),
+    "DiscrepancyConfig.holdout_fraction": ("--holdout", _same, "", False),
+    "DiscrepancyConfig.n_jobs": ("--jobs", _same, "", False),
+    "DiscrepancyConfig.candidates": ("--candidates", _same, "", False),
+    "DiscrepancyConfig.seed": ("--seed", _same, "", False),
+    "CalibrationConfig.seed": ("--seed", _same, "", False),
+}
+
+_TEMPLATE = re.compile(r"^The '(?P<name>[^']+)' parameter(?: of (?P<owner>[A-Za-z_][\w.]*))? must be "
+                       r"(?P<allowed>.*)\. Got (?P<given>.*) instead\.(?P<rest>.*)$", re.S)
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_ONE_SIDED = re.compile(rf"^(?P<op>>=|>|<=|<) (?P<x>{_NUM})$")
+_INTERVAL = re.compile(rf"^(?P<noun>(?:an integer |a number |a finite number )?)in (?P<lb>[\[(])(?P<a>{_NUM}), "
+                       rf"(?P<b>{_NUM})(?P<rb>[\])])$")
+_FLIP = {">=": "<=", ">": "<", "<=": ">=", "<": ">", "[": "]", "(": ")", "]": "[", ")": "("}
+
+
+def _convert_allowed(allowed: str, convert, unit: str, decreasing: bool) -> str | None:
+    """``allowed`` (internal units) in the option's units, for simple ranges; None otherwise."""
+    unit = f" {unit}" if unit else ""
+    m = _ONE_SIDED.match(allowed)
+    if m:
+        op = _FLIP[m["op"]] if decreasing else m["op"]
+        return f"{op} {convert(float(m['x'])):.6g}{unit}"
+    m = _INTERVAL.match(allowed)
+    if m:
+        a, b = convert(float(m["a"])), convert(float(m["b"]))
+        lb, rb = m["lb"], m["rb"]
+        if decreasing:
+            a, b, lb, rb = b, a, _FLIP[rb], _FLIP[lb]
+        return f"{m['noun']}in {lb}{a:.6g}, {b:.6g}{rb}{unit}"
+    return None
+
+
+def option_message(message: str, args: argparse.Namespace) -> str:
+    """Rewrite an error that names an internal field to name the command-line option instead.
+
+    Parameters
+    ----------
+    message : str
+        The error message (the project's template "The 'x' parameter [of Y] must be Z. Got W instead.").
+    args : argparse.Namespace
+        The parsed command line; only options of the running command are named.
+
+    Returns
+    -------
+    str
+        ``"--minutes must be >= 2 min. Got 0.5 instead."``, or ``message`` unchanged when it names
+        no field of :data:`FIELD_OPTIONS` that this command has.
+    """
+    m = _TEMPLATE.match(message)
+    if not m:
+        return message
+    name = f"{m['owner']}.{m['name']}" if m["owner"] else m["name"]
+    if name not in FIELD_OPTIONS:
+        return message
+    option, convert, unit, decreasing = FIELD_OPTIONS[name]
+    dest = option.lstrip("-").replace("-", "_")
+    if not hasattr(args, dest):
+        return message
+    typed = getattr(args, dest)
+    typed = ",".join(map(str, typed)) if isinstance(typed, (list, tuple)) else typed
+    converted = _convert_allowed(m["allowed"], convert, unit, decreasing)
+    if converted is None:
+        converted = f"such that {name} is {m['allowed']} (it was {m['given']})"
+    shown = f"{typed:g}" if isinstance(typed, float) else str(typed)
+    return f"{option} must be {converted}. Got {shown} instead.{m['rest']}"

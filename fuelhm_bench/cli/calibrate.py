@@ -33,10 +33,11 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.calibration.report import calibration_summary, plot_curves
     from fuelhm_bench.cli._common import check_output, progress_bar
     from fuelhm_bench.io import read_flights, split_flights
+    from fuelhm_bench.io.outputs import atomic_output
     from fuelhm_bench.physics.model import load_model, save_model
 
     out = check_output(args.out, force=args.force)
-    plot = check_output(args.plot, force=args.force) if args.plot else None
+    plot = check_output(args.plot, force=args.force, option="--plot") if args.plot else None
     start = load_model(args.model) if args.model else None
     flights, rejected = split_flights(read_flights(args.flights), source=str(args.flights))
     for r in rejected:
@@ -49,14 +50,16 @@ def run(args: argparse.Namespace) -> int:
     header = (f"fuelhm-bench calibrate {args.flights}: {len(flights)} flight(s), {len(result.unit_models)} unit(s)\n"
               f"gap (RMS velocity residual over the curve) {result.gap_before:.3f} -> {result.gap_fleet:.3f} mm/s "
               f"(fleet model), {result.gap_after:.3f} mm/s per unit")
-    save_model(result.model, out, overwrite=args.force, header=header)
+    with atomic_output(out, force=args.force, option="--out") as tmp:
+        save_model(result.model, tmp, header=header)
     if plot is not None:
         curves = {"before (start model)": result.v_before, "after (recalibrated per unit)": result.v_after}
         if len(result.unit_models) > 1:
             curves["after (fleet model written)"] = result.v_fleet
-        plot_curves(result.evaluation, curves, plot, curve=result.curve,
-                    title=f"velocity gain: gap {result.gap_before:.3f} -> {result.gap_after:.3f} mm/s per unit, "
-                          f"{result.gap_fleet:.3f} mm/s fleet model")
+        with atomic_output(plot, force=args.force, option="--plot") as tmp:
+            plot_curves(result.evaluation, curves, tmp, curve=result.curve,
+                        title=f"velocity gain: gap {result.gap_before:.3f} -> {result.gap_after:.3f} mm/s per "
+                              f"unit, {result.gap_fleet:.3f} mm/s fleet model")
     print(calibration_summary(result))
     print(f"wrote {out}" + (f" and {plot}" if plot is not None else ""))
     return 0

@@ -42,20 +42,25 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy
     from fuelhm_bench.calibration.report import json_text, write_discrepancy_report
     from fuelhm_bench.cli._common import check_output_dir, progress_bar
-    from fuelhm_bench.errors import OutputPathError
     from fuelhm_bench.io import read_flights, split_flights
     from fuelhm_bench.physics.model import load_model, save_model
 
+    from fuelhm_bench.errors import UnknownNameError, did_you_mean
+    from fuelhm_bench.taxonomy import EFFECT_IDS
+
     candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
+    for c in candidates:
+        if c not in EFFECT_IDS:
+            raise UnknownNameError(f"--candidates: unknown effect '{c}'. Allowed: {', '.join(EFFECT_IDS)}."
+                                   f"{did_you_mean(c, EFFECT_IDS)}")
+    if not candidates:
+        raise UnknownNameError(f"--candidates must name at least one effect of {', '.join(EFFECT_IDS)}. Got "
+                               f"'{args.candidates}' instead.")
     config = DiscrepancyConfig(holdout_fraction=args.holdout, candidates=candidates, n_jobs=args.jobs,
                                seed=args.seed)
     out_dir = None
     if args.out:
-        out_dir = check_output_dir(args.out)
-        existing = [name for name in OUTPUT_FILES if (Path(out_dir) / name).exists()]
-        if existing and not args.force:
-            raise OutputPathError(f"{out_dir} already holds {', '.join(existing)}; refusing to overwrite "
-                                  "(pass --force).")
+        out_dir = check_output_dir(args.out, force=args.force, names=OUTPUT_FILES)
     model = load_model(args.model) if args.model else None
     flights, rejected = split_flights(read_flights(args.flights), source=str(args.flights))
     for r in rejected:

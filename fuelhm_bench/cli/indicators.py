@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fuelhm_bench.cli._common import check_output, progress_bar
+from fuelhm_bench.cli._common import check_output, extraction_config, progress_bar
+from fuelhm_bench.io.outputs import atomic_output
 
 
 def register(sub) -> None:
@@ -37,7 +38,11 @@ def run(args: argparse.Namespace) -> int:
     with progress_bar(len(flights), "extracting") as bar:
         for start in range(0, len(flights), 64):
             chunk = flights[start:start + 64]
-            rows.append(extract_table(chunk, on_error="flag"))
+            configs = [extraction_config(f) for f in chunk]
+            if all(c == configs[0] for c in configs):
+                rows.append(extract_table(chunk, configs[0], on_error="flag"))
+            else:  # bench recordings (no end stops) mixed with flights: one configuration each
+                rows += [extract_table([f], c, on_error="flag") for f, c in zip(chunk, configs)]
             bar.update(len(chunk))
     table = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
     if rejected:
@@ -55,11 +60,27 @@ def run(args: argparse.Namespace) -> int:
         table = pd.concat([table, rej[[c for c in table_columns("unit_id" in rej) if c in rej]]], ignore_index=True)
         for r in rejected:
             print(f"warning: {r}", file=sys.stderr)
-    if out.suffix == ".parquet":
-        table.to_parquet(out, index=False)
-    else:
-        table.to_csv(out, index=False)
+    _refuse_meaningless(table, args.flights)
+    with atomic_output(out, force=args.force, option="--out") as tmp:
+        if out.suffix == ".parquet":
+            table.to_parquet(tmp, index=False)
+        else:
+            table.to_csv(tmp, index=False)
     n_ok = int((table["quality_reason"] == "").sum()) if len(table) else 0
     print(f"wrote {len(table)} rows to {out} ({n_ok} flights with all 10 indicators valid, "
           f"{len(rejected)} rejected)")
     return 0
+
+
+def _refuse_meaningless(table, source) -> None:
+    """No table is written when no flight has a single valid indicator (it would mean nothing)."""
+    from fuelhm_bench.errors import DataFormatError
+    from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+    valid = table[[f"{n}_valid" for n in INDICATOR_NAMES]].to_numpy(dtype=bool) if len(table) else None
+    if valid is not None and valid.any():
+        return
+    reasons = table["quality_reason"].value_counts() if len(table) else None
+    top = f" Most common reason ({reasons.iloc[0]} of {len(table)} flights): {reasons.index[0]}" \
+        if reasons is not None and len(reasons) else ""
+    raise DataFormatError(f"{source}: no flight has a single valid indicator, so no table is written.{top}")

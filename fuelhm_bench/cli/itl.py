@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from fuelhm_bench.cli._common import check_output_dir, non_negative_int, positive_float, positive_int, progress_bar
+from fuelhm_bench.cli._common import bounded, check_output_dir, non_negative_int, progress_bar
 
 
 def register(sub) -> None:
@@ -16,11 +16,12 @@ def register(sub) -> None:
                                    "and write itl.csv, signatures.csv/.md (Table IV, eq. 9) and plots.")
     p.add_argument("--scenario", default=None,
                    help="scenario name or YAML file: mission, sensor and dispersion of its training fleet")
-    p.add_argument("--units", type=positive_int, default=8, help="DOE units (default 8)")
+    p.add_argument("--units", type=bounded(int, 1, 10_000), default=8, help="DOE units (default 8)")
     p.add_argument("--intensities", default="0.25,0.5,0.75,1", help="comma-separated intensities in (0, 1]")
-    p.add_argument("--minutes", type=positive_float, default=None, help="flight duration [min] (default 15)")
-    p.add_argument("--healthy-units", type=positive_int, default=8, help="units of the healthy fleet (default 8)")
-    p.add_argument("--healthy-flights", type=positive_int, default=5, help="flights per healthy unit (default 5)")
+    p.add_argument("--minutes", type=bounded(float, 2.0, 1440.0, "min"), default=None,
+                   help="flight duration [min], in [2, 1440] (default 15)")
+    p.add_argument("--healthy-units", type=bounded(int, 1, 10_000), default=8, help="units of the healthy fleet (default 8)")
+    p.add_argument("--healthy-flights", type=bounded(int, 1, 10_000), default=5, help="flights per healthy unit (default 5)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="master seed (default 0)")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=run)
@@ -30,11 +31,14 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.errors import ParameterError
     from fuelhm_bench.knowledge import KnowledgeBuild, build_knowledge, write_knowledge
 
-    out = check_output_dir(args.out)
     try:
         intensities = tuple(float(x) for x in args.intensities.split(","))
     except ValueError:
-        raise ParameterError(f"--intensities must be comma-separated numbers in (0, 1]. Got '{args.intensities}'.") from None
+        intensities = (float("nan"),)
+    if not all(0.0 < x <= 1.0 for x in intensities):
+        raise ParameterError(f"--intensities must be comma-separated numbers in (0, 1]. Got '{args.intensities}' "
+                             "instead.")
+    out = check_output_dir(args.out)
     build = KnowledgeBuild.from_scenario(args.scenario, doe_units=args.units, intensities=intensities,
                                          minutes=args.minutes, healthy_units=args.healthy_units,
                                          healthy_flights=args.healthy_flights, seed=args.seed)

@@ -53,33 +53,51 @@ def _load(path):
     return flights
 
 
+def _curve(f, source, annotate):
+    """Raw points, smoothed curve and indicators of one flight; refuses a flight with nothing to draw."""
+    from fuelhm_bench.cli._common import extraction_config
+    from fuelhm_bench.indicators import extract_indicators, velocity_gain_curve, velocity_points
+
+    config = extraction_config(f)
+    i, v = velocity_points(f.time_s, f.current_ma, f.position_mm, config, flight_id=f.flight_id)
+    if i.size == 0:
+        raise DataFormatError(
+            f"{source}: flight {f.flight_id!r} has no usable velocity-gain point: all its {f.n_samples} samples are "
+            "masked (end stops, current limits, recording gaps or fast current steps), so there is nothing to "
+            "draw. Check the columns' units (s, mA, mm) and that the current moves the rod.")
+    curve = velocity_gain_curve(f.time_s, f.current_ma, f.position_mm, config, flight_id=f.flight_id)
+    inds = extract_indicators(f.time_s, f.current_ma, f.position_mm, config, flight_id=f.flight_id) \
+        if annotate else None
+    return i, v, curve, inds
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from fuelhm_bench.indicators import extract_indicators, velocity_gain_curve, velocity_points
     from fuelhm_bench.indicators.plot import velocity_gain_figure
+    from fuelhm_bench.io.outputs import atomic_output
 
     out = check_output(args.out, force=args.force)
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):
-        raise DataFormatError(f"--out {out}: the image format must be .png, .pdf or .svg.")
+        raise DataFormatError(f"--out {out}: the image format must be .png, .pdf or .svg. Got "
+                              f"'{out.suffix or out.name}' instead.")
     chosen = _select(_load(args.flights), args.flight, args.flights)
     curves, labels, inds = [], [], []
     pts_i, pts_v = [], []
     for f in chosen:
-        i, v = velocity_points(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id)
+        i, v, curve, ind = _curve(f, args.flights, args.annotate)
         pts_i.append(i)
         pts_v.append(v)
-        curves.append(velocity_gain_curve(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id))
+        curves.append(curve)
         labels.append(f"flight {f.flight_id}")
-        inds.append(extract_indicators(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id)
-                    if args.annotate else None)
+        inds.append(ind)
     for spec in args.overlay:
         path, _, label = spec.partition("=")
         f = _select(_load(path), None, path)[0]
-        curves.append(velocity_gain_curve(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id))
+        _, _, curve, ind = _curve(f, path, args.annotate)
+        curves.append(curve)
         labels.append(label or path)
-        inds.append(extract_indicators(f.time_s, f.current_ma, f.position_mm, flight_id=f.flight_id)
-                    if args.annotate else None)
+        inds.append(ind)
     current = np.concatenate(pts_i)
     velocity = np.concatenate(pts_v)
     if len(curves) == 1:
@@ -87,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         fig = velocity_gain_figure(current, velocity, curves, inds if args.annotate else None, labels=labels,
                                    title=args.title)
-    fig.savefig(out, dpi=130)
+    with atomic_output(out, force=args.force, option="--out") as tmp:
+        fig.savefig(tmp, dpi=130)
     print(f"wrote {out} ({len(curves)} curve{'s' if len(curves) > 1 else ''}, {current.size} raw points)")
     return 0

@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from fuelhm_bench.cli._common import check_output
-from fuelhm_bench.errors import OutputPathError
+from fuelhm_bench.io.outputs import write_text
 
 
 def register(sub) -> None:
@@ -26,10 +25,6 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None:
         print(text, end="")
         return 0
-    out = check_output(args.out, force=args.force)
-    try:
-        out.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise OutputPathError(f"Cannot write the schema to {out}: {exc.strerror or exc}.") from None
+    out = write_text(args.out, text, force=args.force, option="--out")
     print(f"wrote the scenario JSON Schema to {out}")
     return 0

@@ -5,8 +5,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from fuelhm_bench.cli._common import check_output, non_negative_int, positive_float, positive_int, progress_bar
+from fuelhm_bench.cli._common import (
+    bounded,
+    check_output,
+    check_run_budget,
+    non_negative_int,
+    positive_int,
+    progress_bar,
+)
 from fuelhm_bench.errors import ParameterError
+
+#: Bounds of the fleet options (those of scenario files, fuelhm_bench.scenarios).
+MAX_UNITS = 10_000
+MAX_FLIGHTS = 10_000
+#: Flight duration bounds [min]: the engine start (60 s) plus one minute, and 24 h.
+MIN_MINUTES = 2.0
+MAX_MINUTES = 1440.0
 
 
 def add_model_arguments(p: argparse.ArgumentParser) -> None:
@@ -14,10 +28,12 @@ def add_model_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", metavar="YAML", help="model parameter file (e.g. from 'calibrate'); default nominal")
     p.add_argument("--effect", action="append", default=[], metavar="ID[:PARAM=VALUE,...]",
                    help="switch on an optional physical effect (repeatable), e.g. rod_friction:coulomb_n=200")
-    p.add_argument("--frame-rate", type=positive_float, default=None, metavar="HZ",
-                   help="FADEC frame / sample rate [Hz] (default 100)")
-    p.add_argument("--noise-um", type=float, default=None, metavar="UM", help="LVDT noise standard deviation [um]")
-    p.add_argument("--adc-bits", type=int, default=None, metavar="BITS", help="LVDT ADC resolution (0: none)")
+    p.add_argument("--frame-rate", type=bounded(float, 1.0, 1e4, "Hz"), default=None, metavar="HZ",
+                   help="FADEC frame / sample rate [Hz], in [1, 10000] (default 100)")
+    p.add_argument("--noise-um", type=bounded(float, 0.0, 1e4, "um"), default=None, metavar="UM",
+                   help="LVDT noise standard deviation [um]")
+    p.add_argument("--adc-bits", type=bounded(int, 0, 24), default=None, metavar="BITS",
+                   help="LVDT ADC resolution, in [0, 24] (0: none)")
 
 
 def model_from_args(args: argparse.Namespace):
@@ -25,9 +41,17 @@ def model_from_args(args: argparse.Namespace):
     from fuelhm_bench.physics.effects import parse_effect_spec
     from fuelhm_bench.physics.model import LoopModel, load_model
 
+    from fuelhm_bench.errors import FuelHMError
+
     model = load_model(args.model) if args.model else LoopModel()
     for spec in args.effect:
-        model = model.with_effect(parse_effect_spec(spec))
+        try:
+            effect = parse_effect_spec(spec)
+        except FuelHMError as exc:
+            reason = str(exc).removeprefix(f"Effect spec '{spec}': ")
+            raise ParameterError(f"--effect {spec!r}: {reason} The form is ID[:PARAM=VALUE,...], e.g. "
+                                 "rod_friction:coulomb_n=200.") from None
+        model = model.with_effect(effect)
     if args.frame_rate is not None:
         model = model.with_parameters({"controller.frame_s": 1.0 / args.frame_rate})
     if args.noise_um is not None:
@@ -41,14 +65,21 @@ def parse_degrade(spec: str) -> tuple[str, float]:
     """Parse ``MODE:INTENSITY``."""
     from fuelhm_bench.physics.degradations import validate_intensities
 
+    from fuelhm_bench.errors import UnknownNameError
+
     mode, sep, value = spec.partition(":")
     if not sep:
         raise ParameterError(f"--degrade '{spec}': expected MODE:INTENSITY, e.g. internal_leakage:0.5.")
     try:
         f = float(value)
     except ValueError:
-        raise ParameterError(f"--degrade '{spec}': the intensity must be a number in [0, 1]. Got '{value}' instead.") from None
-    clean = validate_intensities({mode.strip(): f}, where="--degrade")
+        f = float("nan")
+    if not 0.0 <= f <= 1.0:
+        raise ParameterError(f"--degrade '{spec}': the intensity must be a number in [0, 1]. Got '{value}' instead.")
+    try:
+        clean = validate_intensities({mode.strip(): f}, where="--degrade")
+    except UnknownNameError as exc:
+        raise UnknownNameError(f"--degrade '{spec}': {exc}") from None
     return next(iter(clean.items()))
 
 
@@ -57,9 +88,13 @@ def register(sub) -> None:
                        description="Simulate N units flying M flights each, with optional degradations and "
                                    "effects; writes the flight table and a labels table beside it "
                                    "(flights.parquet -> flights.labels.parquet).")
-    p.add_argument("--units", type=positive_int, default=2, help="number of units (default 2)")
-    p.add_argument("--flights", type=positive_int, default=5, help="flights per unit (default 5)")
-    p.add_argument("--minutes", type=positive_float, default=60.0, help="flight duration [min] (default 60)")
+    p.add_argument("--units", type=bounded(int, 1, MAX_UNITS), default=2,
+                   help=f"number of units, in [1, {MAX_UNITS}] (default 2)")
+    p.add_argument("--flights", type=bounded(int, 1, MAX_FLIGHTS), default=5,
+                   help=f"flights per unit, in [1, {MAX_FLIGHTS}] (default 5)")
+    p.add_argument("--minutes", type=bounded(float, MIN_MINUTES, MAX_MINUTES, "min"), default=60.0,
+                   help=f"flight duration [min], in [{MIN_MINUTES:g}, {MAX_MINUTES:g}] (default 60); "
+                        "units x flights x minutes is limited by the run budget (FUELHM_RUN_BUDGET_FLIGHT_HOURS)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="master seed (default 0)")
     p.add_argument("--degrade", action="append", default=[], metavar="MODE:INTENSITY",
                    help="degradation with its maximum intensity in [0, 1] (repeatable)")
@@ -67,8 +102,10 @@ def register(sub) -> None:
                    help="onset flight of the degradations, drawn uniformly per unit (default 0-0: from the first flight)")
     p.add_argument("--growth", choices=("step", "linear", "exponential"), default="step",
                    help="growth law from the onset (default step)")
-    p.add_argument("--ramp-flights", type=positive_int, default=10, help="flights from onset to maximum (default 10)")
-    p.add_argument("--dispersion", type=float, default=1.0, help="scale of the manufacturing dispersion (default 1)")
+    p.add_argument("--ramp-flights", type=bounded(int, 1, MAX_FLIGHTS), default=10,
+                   help="flights from onset to maximum (default 10)")
+    p.add_argument("--dispersion", type=bounded(float, 0.0, 10.0), default=1.0,
+                   help="scale of the manufacturing dispersion, in [0, 10] (default 1)")
     add_model_arguments(p)
     p.add_argument("--batch-size", type=positive_int, default=8, help="flights simulated together (memory bound)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
@@ -76,7 +113,8 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def parse_onset(text: str) -> tuple[int, int]:
+def parse_onset(text: str, n_flights: int | None = None) -> tuple[int, int]:
+    """Parse ``--onset MIN-MAX`` (0-based flight indices), within ``n_flights`` flights when given."""
     lo, sep, hi = text.partition("-")
     try:
         a, b = int(lo), int(hi if sep else lo)
@@ -84,10 +122,18 @@ def parse_onset(text: str) -> tuple[int, int]:
         raise ParameterError(f"--onset must be MIN-MAX with integers >= 0. Got '{text}' instead.") from None
     if a < 0 or b < a:
         raise ParameterError(f"--onset must be MIN-MAX with 0 <= MIN <= MAX. Got '{text}' instead.")
+    if n_flights is not None and b > n_flights - 1:
+        raise ParameterError(f"--onset must be MIN-MAX with MAX <= --flights - 1 = {n_flights - 1} (onsets are "
+                             f"0-based flight indices; a later onset would never start). Got '{text}' instead.")
     return a, b
 
 
 def run(args: argparse.Namespace) -> int:
+    # Option checks first: a misuse is refused before the simulator is loaded.
+    check_run_budget(args.units, args.flights, args.minutes,
+                     args.frame_rate if args.frame_rate is not None else 100.0)
+    onset_min, onset_max = parse_onset(args.onset, args.flights) if args.degrade else parse_onset(args.onset)
+
     from fuelhm_bench.flights.fleet import FleetConfig, build_units, flights_frame, iter_flights, labels_frame
     from fuelhm_bench.flights.mission import MissionProfile
     from fuelhm_bench.flights.schedule import ModeSchedule
@@ -95,7 +141,6 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.physics.model import Dispersion
 
     model = model_from_args(args)
-    onset_min, onset_max = parse_onset(args.onset)
     schedules = []
     for spec in args.degrade:
         mode, f = parse_degrade(spec)

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import argparse
 
-from fuelhm_bench.cli._common import check_output, non_negative_int, positive_float, positive_int
+from fuelhm_bench.cli._common import bounded, check_output, non_negative_int, positive_float
+from fuelhm_bench.errors import ParameterError
+
+#: Largest sweep written, in samples (about 0.5 GB in memory).
+MAX_SAMPLES = 10_000_000
 from fuelhm_bench.cli.simulate import add_model_arguments, model_from_args, parse_degrade
 
 
@@ -12,12 +16,16 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="velocity-gain sweep of a model (paper section IV.B)",
                        description="Ramp the current slowly from the lower to the upper saturation and back, "
                                    "open loop, on a virtual bench without end stops, and write the result in the "
-                                   "flight format of docs/data-format.md (one flight; the rod position is the true one of the virtual "
-                                   "bench, and the true velocity is in an extra 'velocity_true_mm_s' column).")
-    p.add_argument("--min-ma", type=float, default=-12.0, help="lowest current [mA] (default -12)")
-    p.add_argument("--max-ma", type=float, default=12.0, help="highest current [mA] (default 12)")
-    p.add_argument("--ramp-seconds", type=positive_float, default=60.0, help="duration of each one-way ramp [s]")
-    p.add_argument("--cycles", type=positive_int, default=1, help="up-and-down cycles (default 1)")
+                                   "flight format (one flight; the rod position is the true one of the virtual "
+                                   "bench, phase 'bench_sweep' marks it, and the true velocity is in an extra "
+                                   "'velocity_true_mm_s' column).")
+    p.add_argument("--min-ma", type=bounded(float, -100.0, 100.0, "mA"), default=-12.0,
+                   help="lowest current [mA] (default -12)")
+    p.add_argument("--max-ma", type=bounded(float, -100.0, 100.0, "mA"), default=12.0,
+                   help="highest current [mA] (default 12)")
+    p.add_argument("--ramp-seconds", type=bounded(float, 0.1, 3600.0, "s"), default=60.0,
+                   help="duration of each one-way ramp [s], in [0.1, 3600]")
+    p.add_argument("--cycles", type=bounded(int, 1, 100), default=1, help="up-and-down cycles (default 1)")
     p.add_argument("--n2-pct", type=positive_float, default=82.0, help="engine speed, sets supply pressure [%%]")
     p.add_argument("--degrade", action="append", default=[], metavar="MODE:INTENSITY",
                    help="degradation intensity in [0, 1] (repeatable)")
@@ -33,8 +41,15 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from fuelhm_bench.flights.sweep import VelocityGainSweep, run_sweep
-    from fuelhm_bench.io import write_flights
+    from fuelhm_bench.io import BENCH_PHASE, write_flights
 
+    n_samples = 2 * args.cycles * args.ramp_seconds * (args.frame_rate or 100.0)
+    if n_samples > MAX_SAMPLES:
+        raise ParameterError(f"--cycles {args.cycles} x 2 x --ramp-seconds {args.ramp_seconds:g} at "
+                             f"{args.frame_rate or 100.0:g} Hz is {n_samples:.3g} samples; the sweep must be at most "
+                             f"{MAX_SAMPLES:.0e} samples (shorter ramps or fewer cycles).")
+    if args.max_ma <= args.min_ma:
+        raise ParameterError(f"--max-ma must be > --min-ma ({args.min_ma:g} mA). Got {args.max_ma:g} instead.")
     model = model_from_args(args)
     model = model.degraded(dict(parse_degrade(s) for s in args.degrade))
     sweep = VelocityGainSweep(current_min_a=args.min_ma * 1e-3, current_max_a=args.max_ma * 1e-3,
@@ -53,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
         "position_mm": out.true_position_m * 1e3,
         "n2_pct": np.full(n, args.n2_pct),
         "velocity_true_mm_s": out.true_velocity_m_s * 1e3,
+        # Declares the bench without end stops (rule F6 of fuelhm_bench.io.flights; no end-stop mask).
+        "phase": np.full(n, BENCH_PHASE, dtype=object),
     })
     write_flights(frame, out_path, overwrite=args.force)
     print(f"wrote a {n}-sample velocity-gain sweep to {out_path}")

@@ -7,22 +7,19 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from sklearn.exceptions import NotFittedError as _SklearnNotFittedError
 
-from fuelhm_bench.errors import DataFormatError, FuelHMError, OutputPathError, ParameterError, UnknownNameError
+from fuelhm_bench.errors import (  # noqa: F401 (NotFittedError re-exported)
+    DataFormatError,
+    NotFittedError,
+    OutputPathError,
+    ParameterError,
+    UnknownNameError,
+    parameter_error,
+)
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
 
 #: Label of healthy flights in the ``mode`` column of a DOE table.
 HEALTHY: str = "healthy"
-
-
-class NotFittedError(FuelHMError, _SklearnNotFittedError):
-    """A diagnosis estimator was used before ``fit``.
-
-    Derives from both :class:`fuelhm_bench.errors.FuelHMError` (so the CLI
-    catches it with every other user error) and scikit-learn's
-    ``NotFittedError`` (so scikit-learn tooling recognises it).
-    """
 
 
 def param_error(name: str, owner: str, allowed: str, given: object) -> ParameterError:
@@ -43,7 +40,7 @@ def param_error(name: str, owner: str, allowed: str, given: object) -> Parameter
     -------
     ParameterError
     """
-    return ParameterError(f"The '{name}' parameter of {owner} must be {allowed}. Got {given!r} instead.")
+    return parameter_error(name, owner, allowed, given)
 
 
 def check_features(features: Iterable[str] | None, owner: str, name: str = "features") -> tuple[str, ...]:

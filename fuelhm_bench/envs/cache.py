@@ -47,7 +47,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.errors import ParameterError, parameter_error
 
 __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
            "knowledge_build", "published_knowledge", "resolve_scenario", "scored_indicators",
@@ -103,8 +103,7 @@ class KnowledgeSize:
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ParameterError:
-            return ParameterError(f"The '{name}' parameter of KnowledgeSize must be {allowed}. "
-                                  f"Got {getattr(self, name)!r} instead.")
+            return parameter_error(name, "KnowledgeSize", allowed, getattr(self, name))
 
         for name in ("doe_units", "healthy_units", "healthy_flights", "surrogate_units", "surrogate_flights"):
             value = getattr(self, name)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.errors import ParameterError, parameter_error
 
 #: Hard budget of the streaming extractor's state (bytes of all its NumPy arrays).
 STREAMING_STATE_BUDGET_BYTES: int = 64 * 1024
@@ -32,9 +32,7 @@ N_SCALARS: int = 2
 
 def _param_error(name: str, allowed: str, given: object) -> ParameterError:
     """Build the project's uniform parameter error for :class:`ExtractionConfig`."""
-    return ParameterError(
-        f"The '{name}' parameter of ExtractionConfig must be {allowed}. Got {given!r} instead."
-    )
+    return parameter_error(name, "ExtractionConfig", allowed, given)
 
 
 def _is_real(value: object) -> bool:

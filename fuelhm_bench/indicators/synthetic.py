@@ -26,12 +26,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.errors import ParameterError, parameter_error
 
 
 def _err(name: str, owner: str, allowed: str, given: object) -> ParameterError:
-    return ParameterError(f"The '{name}' parameter of {owner} must be {allowed}. Got {given!r} "
-                          f"instead.")
+    return parameter_error(name, owner, allowed, given)
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,8 @@ supported file formats and atomic writing.
 """
 
 from fuelhm_bench.io.flights import (
+    BENCH_PHASE,
+    PLAUSIBLE_RANGES,
     DEFAULT_MAX_NAN_GAP,
     DEFAULT_MIN_CURRENT_RANGE_MA,
     DEFAULT_MIN_SAMPLES,
@@ -16,6 +18,7 @@ from fuelhm_bench.io.flights import (
     FlightRejection,
     FlightWriter,
     check_flight,
+    check_plausibility,
     iter_flights,
     labels_path_for,
     read_flights,
@@ -28,6 +31,9 @@ from fuelhm_bench.io.flights import (
 from fuelhm_bench.io.tables import SUPPORTED_SUFFIXES
 
 __all__ = [
+    "BENCH_PHASE",
+    "PLAUSIBLE_RANGES",
+    "check_plausibility",
     "DEFAULT_MAX_NAN_GAP",
     "DEFAULT_MIN_CURRENT_RANGE_MA",
     "DEFAULT_MIN_SAMPLES",

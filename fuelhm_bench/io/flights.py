@@ -36,6 +36,31 @@ F4. The optional columns ``unit_id, demand_mm, n2_pct, fuel_temp_degC, phase``
 F5. :func:`read_flights` refuses a missing file, an unknown suffix, an empty
     file and a table without data rows.
 
+Plausibility rules
+------------------
+Applied by :func:`read_flights` (and :func:`check_plausibility`) to the whole
+file, so that a unit mistake is caught before it gives a silent, meaningless
+result. A violation raises :class:`~fuelhm_bench.errors.DataFormatError`
+naming the file, the column, the observed range and the likely mistake:
+
+F6. Every finite value of a numeric column lies within its plausible range
+    (:data:`PLAUSIBLE_RANGES`): ``time_s`` within +-1e5 s (a flight lasts at most
+    24 h), ``current_mA`` within +-100 mA (the loop works within about +-12 mA),
+    ``position_mm`` and ``demand_mm`` within +-1000 mm (the stroke is 60 mm),
+    ``n2_pct`` in [-1, 200] %, ``fuel_temp_degC`` in [-100, 200] degC. Values
+    1000 times too large are reported as the likely unit mistake (ms for s, uA
+    for mA, um for mm), kelvin for degC; others (e.g. 1e30) as corrupt values.
+    Samples of a virtual bench without end stops (``phase`` equal to
+    :data:`BENCH_PHASE`, written by ``fuelhm-bench sweep``) are exempt for
+    ``position_mm``.
+F7. Columns that are 1000 times too small: ``current_mA`` with every value
+    within +-0.1 mA (but not all zero) looks like amperes; ``position_mm`` with
+    every value within +-0.1 mm (but not all zero) looks like metres.
+F8. The median interval between consecutive samples of a flight (over the
+    whole file) lies in [1e-4, 1] s, i.e. a sampling rate of 1 Hz to 10 kHz
+    (the frame rates a scenario allows); a median interval of several seconds
+    means times in milliseconds.
+
 Per-flight rules
 ----------------
 Applied by :func:`split_flights` / :func:`check_flight`. A flight that breaks
@@ -105,6 +130,7 @@ from fuelhm_bench.io.tables import (
 )
 
 __all__ = [
+    "BENCH_PHASE",
     "DEFAULT_MAX_NAN_GAP",
     "DEFAULT_MIN_CURRENT_RANGE_MA",
     "DEFAULT_MIN_SAMPLES",
@@ -114,7 +140,9 @@ __all__ = [
     "FlightArrays",
     "FlightRejection",
     "FlightWriter",
+    "PLAUSIBLE_RANGES",
     "check_flight",
+    "check_plausibility",
     "iter_flights",
     "labels_path_for",
     "read_flights",
@@ -146,6 +174,33 @@ DEFAULT_MIN_SAMPLES: int = 2
 DEFAULT_MAX_NAN_GAP: int = 3
 #: Default of ``min_current_range_ma`` (rule P8), in mA.
 DEFAULT_MIN_CURRENT_RANGE_MA: float = 0.0
+
+#: Phase value of samples recorded on a virtual bench without end stops (``fuelhm-bench sweep``):
+#: the rod position is not limited to the stroke (rule F6) and no end-stop mask applies to it.
+BENCH_PHASE: str = "bench_sweep"
+#: Plausible range of each numeric column (rule F6), in the column's unit.
+PLAUSIBLE_RANGES: dict[str, tuple[float, float]] = {
+    "time_s": (-1e5, 1e5),
+    "current_mA": (-100.0, 100.0),
+    "position_mm": (-1000.0, 1000.0),
+    "demand_mm": (-1000.0, 1000.0),
+    "n2_pct": (-1.0, 200.0),
+    "fuel_temp_degC": (-100.0, 200.0),
+}
+#: Rule F6: the likely mistake when values are 1000 times too large.
+_TOO_LARGE_UNITS: dict[str, str] = {
+    "time_s": "milliseconds instead of seconds (divide by 1000)",
+    "current_mA": "microamperes instead of milliamperes (divide by 1000)",
+    "position_mm": "micrometres instead of millimetres (divide by 1000)",
+    "demand_mm": "micrometres instead of millimetres (divide by 1000)",
+}
+#: Rule F7: columns whose values all within +-limit look 1000 times too small.
+_TOO_SMALL: dict[str, tuple[float, str]] = {
+    "current_mA": (0.1, "amperes instead of milliamperes (multiply by 1000)"),
+    "position_mm": (0.1, "metres instead of millimetres (multiply by 1000)"),
+}
+#: Rule F8: plausible median sampling interval [s] (10 kHz to 1 Hz).
+PLAUSIBLE_SAMPLING_S: tuple[float, float] = (1e-4, 1.0)
 
 #: (column, FlightArrays attribute) of the two signals every flight must have.
 _SIGNALS: tuple[tuple[str, str], ...] = (
@@ -508,7 +563,86 @@ def read_flights(path: str | os.PathLike[str]) -> pd.DataFrame:
             f"The flight file '{path}' contains no samples: it has columns "
             f"{[str(c) for c in frame.columns]} but no data rows."
         )
-    return _validate_table(frame, str(path), first_line)
+    table = _validate_table(frame, str(path), first_line)
+    check_plausibility(table, source=str(path))
+    return table
+
+
+def _range_text(values: np.ndarray) -> str:
+    return f"[{values.min():.4g}, {values.max():.4g}]"
+
+
+def check_plausibility(table: pd.DataFrame, *, source: str = "<table>") -> None:
+    """Apply the plausibility rules F6-F8 to a validated flight table.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        A table normalized by :func:`validate_flight_table` (float64 columns).
+    source : str, default="<table>"
+        Name of the table's origin (normally the file), used in messages.
+
+    Raises
+    ------
+    DataFormatError
+        Naming ``source``, the column, the observed range, the plausible range
+        and the likely unit mistake.
+    """
+    bench = (table["phase"] == BENCH_PHASE).to_numpy() if "phase" in table.columns else None
+    for column, (lo, hi) in PLAUSIBLE_RANGES.items():
+        if column not in table.columns:
+            continue
+        values = table[column].to_numpy()
+        if bench is not None and column == "position_mm":
+            values = values[~bench]
+        values = values[np.isfinite(values)]
+        if values.size == 0:
+            continue
+        unit = NUMERIC_COLUMNS[column]
+        bad = (values < lo) | (values > hi)
+        if bad.any():  # rule F6
+            scaled = values / 1000.0
+            if column in _TOO_LARGE_UNITS and ((scaled >= lo) & (scaled <= hi)).all():
+                likely = f"It looks like {_TOO_LARGE_UNITS[column]}."
+            elif column == "fuel_temp_degC" and ((values - 273.15 >= lo) & (values - 273.15 <= hi)).all():
+                likely = "It looks like kelvin instead of degrees Celsius (subtract 273.15)."
+            else:
+                worst = values[bad][np.argmax(np.abs(values[bad]))]
+                likely = (f"{int(bad.sum())} value(s) are out of range, the most extreme {worst:.4g} {unit}: "
+                          "not a measurement (a corrupt file or a wrong column?).")
+            if column == "position_mm":
+                likely += (f" (Samples of a virtual bench without end stops must say so with phase "
+                           f"'{BENCH_PHASE}'.)")
+            raise DataFormatError(
+                f"Column '{column}' of '{source}' ranges over {_range_text(values)} {unit}, outside its "
+                f"plausible range [{lo:g}, {hi:g}] {unit}. {likely}")
+        if column in _TOO_SMALL:  # rule F7
+            limit, likely = _TOO_SMALL[column]
+            magnitude = float(np.abs(values).max())
+            if 0.0 < magnitude < limit:
+                raise DataFormatError(
+                    f"Column '{column}' of '{source}' ranges over only {_range_text(values)} {unit} (every "
+                    f"value within +-{limit:g} {unit}): implausibly small for the {column.split('_')[0]} of the "
+                    f"actuation loop. It looks like {likely}.")
+    _check_sampling(table, source)
+
+
+def _check_sampling(table: pd.DataFrame, source: str) -> None:
+    """Rule F8: the median interval between consecutive samples of a flight."""
+    steps = table.groupby("flight_id", sort=False)["time_s"].diff().to_numpy()
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    if steps.size == 0:
+        return
+    median = float(np.median(steps))
+    lo, hi = PLAUSIBLE_SAMPLING_S
+    if lo <= median <= hi:
+        return
+    likely = ("It looks like milliseconds instead of seconds (divide by 1000)." if median > hi else
+              "Is the column in seconds? (hours or days give intervals this small)")
+    raise DataFormatError(
+        f"Column 'time_s' of '{source}' has a median sampling interval of {median:.4g} s (a rate of "
+        f"{1.0 / median:.4g} Hz; time_s ranges over {_range_text(table['time_s'].dropna().to_numpy())} s), "
+        f"outside the plausible [{lo:g}, {hi:g}] s (1 Hz to 10 kHz). {likely}")
 
 
 def labels_path_for(path: str | os.PathLike[str]) -> Path:

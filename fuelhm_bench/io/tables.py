@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import gzip
 import os
-import uuid
 import zlib
 from pathlib import Path
 from collections.abc import Callable
@@ -35,6 +34,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from fuelhm_bench.errors import DataFormatError, OutputPathError
+from fuelhm_bench.io.outputs import check_output_path, temporary_path
 
 __all__ = [
     "SUPPORTED_SUFFIXES",
@@ -221,7 +221,7 @@ class AtomicTableWriter:
         self._closed = False
         self._prepared = False
         check_output_path(self.path, overwrite=overwrite, what=what)
-        self._tmp = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex}.tmp")
+        self._tmp = temporary_path(self.path)
         try:
             # Create the temporary file now, so an unwritable directory fails early.
             with open(self._tmp, "xb"):
@@ -413,37 +413,3 @@ class AtomicTableWriter:
         finally:
             self._closed = True
             self._tmp.unlink(missing_ok=True)
-
-
-def check_output_path(path: Path, *, overwrite: bool, what: str = "output file") -> None:
-    """Check that ``path`` may be (over)written and create its parent directories.
-
-    Parameters
-    ----------
-    path : pathlib.Path
-        Target file.
-    overwrite : bool
-        Whether an existing file may be replaced.
-    what : str, default="output file"
-        Noun used in error messages.
-
-    Raises
-    ------
-    OutputPathError
-        If ``path`` is a directory, exists while ``overwrite`` is false, or its
-        parent directory cannot be created. The message names the path.
-    """
-    if path.is_dir():
-        raise OutputPathError(f"Cannot write the {what} '{path}': it is a directory.")
-    if path.exists() and not overwrite:
-        raise OutputPathError(
-            f"The {what} '{path}' already exists; pass overwrite=True "
-            "(--force on the command line) to replace it."
-        )
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputPathError(
-            f"Cannot write the {what} '{path}': cannot create its directory "
-            f"'{path.parent}' ({exc.strerror or exc})."
-        ) from exc

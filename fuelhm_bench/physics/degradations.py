@@ -121,14 +121,14 @@ def validate_intensities(intensities: Mapping[str, float], *, where: str = "inte
     ParameterError
         For an intensity outside [0, 1] or not a number.
     """
-    import difflib
     import math
+
+    from fuelhm_bench.errors import did_you_mean
 
     clean: dict[str, float] = {}
     for mode, value in intensities.items():
         if mode not in LAWS:
-            close = difflib.get_close_matches(str(mode), MODE_IDS, n=1)
-            hint = f" Did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(str(mode), MODE_IDS)
             raise UnknownNameError(f"Unknown degradation mode '{mode}' in {where}. Allowed: {', '.join(MODE_IDS)}.{hint}")
         try:
             f = float(value)

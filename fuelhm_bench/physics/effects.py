@@ -218,10 +218,9 @@ assert tuple(EFFECTS) == EFFECT_IDS
 
 
 def _suggest(name: str, options) -> str:
-    import difflib
+    from fuelhm_bench.errors import did_you_mean
 
-    close = difflib.get_close_matches(name, list(options), n=1)
-    return f" Did you mean '{close[0]}'?" if close else ""
+    return did_you_mean(name, options)
 
 
 def make_effect(effect_id: str, **params: float) -> Effect:

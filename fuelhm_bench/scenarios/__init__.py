@@ -22,8 +22,13 @@ from fuelhm_bench.scenarios.jsonschema import scenario_json_schema
 from fuelhm_bench.scenarios.loader import load_scenario_file, parse_scenario
 from fuelhm_bench.scenarios.registry import list_scenarios, load_scenario, shipped_scenario_files
 from fuelhm_bench.scenarios.schema import (
+    DEFAULT_RUN_BUDGET_FLIGHT_HOURS,
     DRIFT_CHANGES,
     FIDELITIES,
+    MAX_DURATION_MIN,
+    MAX_FLIGHTS_PER_UNIT,
+    MAX_UNITS,
+    RUN_BUDGET_ENV,
     SUPPORTED_SCHEMA_VERSIONS,
     CostSpec,
     DegradationSpec,
@@ -32,16 +37,18 @@ from fuelhm_bench.scenarios.schema import (
     HiddenEffectSpec,
     MissionSpec,
     OperatingSpec,
+    RunCost,
     Scenario,
     SeedSpec,
     SensorSpec,
     TrainingSpec,
     drift_parameter_paths,
+    run_budget,
 )
 
 __all__ = [
-    "CostSpec", "DRIFT_CHANGES", "DegradationSpec", "DriftSpec", "FIDELITIES", "FleetSpec", "HiddenEffectSpec",
-    "MissionSpec", "OperatingSpec", "Problem", "SUPPORTED_SCHEMA_VERSIONS", "Scenario", "ScenarioValidationError",
-    "SeedSpec", "SensorSpec", "TrainingSpec", "drift_parameter_paths", "list_scenarios", "load_scenario",
+    "CostSpec", "DEFAULT_RUN_BUDGET_FLIGHT_HOURS", "DRIFT_CHANGES", "DegradationSpec", "DriftSpec", "FIDELITIES", "FleetSpec", "HiddenEffectSpec",
+    "MAX_DURATION_MIN", "MAX_FLIGHTS_PER_UNIT", "MAX_UNITS", "MissionSpec", "OperatingSpec", "Problem", "RUN_BUDGET_ENV", "RunCost", "SUPPORTED_SCHEMA_VERSIONS", "Scenario", "ScenarioValidationError",
+    "SeedSpec", "SensorSpec", "TrainingSpec", "drift_parameter_paths", "run_budget", "list_scenarios", "load_scenario",
     "load_scenario_file", "parse_scenario", "scenario_json_schema", "shipped_scenario_files",
 ]

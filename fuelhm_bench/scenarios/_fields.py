@@ -19,7 +19,6 @@ adds the file name and line number of each.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import inspect
 import math
 import re
@@ -30,7 +29,7 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
-from fuelhm_bench.errors import ScenarioError
+from fuelhm_bench.errors import ScenarioValidationError, did_you_mean, show_value
 
 MISSING = dataclasses.MISSING
 
@@ -100,26 +99,6 @@ class Problem:
         return f"{where}{name or 'the document'} must be {self.allowed}. Got {self.given} instead.{hint}"
 
 
-class ScenarioValidationError(ScenarioError):
-    """A scenario (or one of its sections) failed validation.
-
-    Attributes
-    ----------
-    problems : tuple of Problem
-        Every problem found, in document order where known.
-    owner : str
-        Class that raised it (used to name fields of objects built in Python).
-    """
-
-    def __init__(self, problems: Sequence[Problem], owner: str = "") -> None:
-        self.problems = tuple(problems)
-        self.owner = owner
-        super().__init__("\n".join(p.message(owner) for p in self.problems))
-
-    def __reduce__(self):
-        return (type(self), (self.problems, self.owner))
-
-
 def join(prefix: str, field: str) -> str:
     """Join two field paths (``"fleet" + "units"``, ``"drift" + "[0]"``)."""
     if not prefix:
@@ -152,19 +131,12 @@ def show(value: Any) -> str:
         return "null"
     if isinstance(value, bool):
         return "true" if value else "false"
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
+    return show_value(value)  # bounded: never the repr of a huge expanded value
 
 
 def suggest(name: Any, options: Iterable[str]) -> str:
-    """``"Did you mean 'x'?"`` for the closest option (difflib), or ``""``."""
-    if not isinstance(name, str) or not name:
-        return ""
-    options = list(options)
-    close = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
-    if not close:  # an abbreviation: 'expo' -> 'exponential'
-        close = [o for o in options if o.lower().startswith(name.lower())][:1]
-    return f"Did you mean '{close[0]}'?" if close else ""
+    """``"Did you mean 'x'?"`` (no leading space) from :func:`fuelhm_bench.errors.did_you_mean`."""
+    return did_you_mean(name, options, sep="")
 
 
 def unknown_key(field: str, key: Any, allowed: Sequence[str]) -> Problem:

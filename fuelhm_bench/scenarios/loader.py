@@ -16,11 +16,17 @@ Notes
   plain (unquoted) scalar that Python's ``float`` accepts is read as a number.
 * Anchors, aliases and merge keys (``<<: *base``) are supported; a key given
   twice in one mapping is an error.
+* Bounds, so that any file is accepted or refused within a second and a few
+  tens of MB: a file holds at most :data:`MAX_FILE_BYTES`, nests at most
+  :data:`MAX_DEPTH` levels, and expands to at most :data:`MAX_EXPANDED_NODES`
+  YAML values once its aliases are expanded (the "billion laughs" shape is
+  refused before anything is built); recursive aliases are refused.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import yaml
@@ -39,9 +45,107 @@ from fuelhm_bench.scenarios._fields import (
 )
 from fuelhm_bench.scenarios.schema import SUPPORTED_SCHEMA_VERSIONS, Scenario
 
-__all__ = ["load_scenario_file", "parse_scenario"]
+__all__ = ["MAX_DEPTH", "MAX_EXPANDED_NODES", "MAX_FILE_BYTES", "load_scenario_file", "parse_scenario"]
 
 _FAILED = object()
+
+#: Largest scenario file read, in bytes (shipped files are 2-4 KB; PyYAML reads about 100 KB per second).
+MAX_FILE_BYTES: int = 100_000
+#: Deepest nesting of YAML collections, counting alias expansion (a scenario needs about 5).
+MAX_DEPTH: int = 50
+#: Most YAML values (scalars, lists, mappings) once aliases are expanded (a scenario needs a few hundred).
+MAX_EXPANDED_NODES: int = 100_000
+
+
+_BRACKETS = re.compile(r"[\[\]{}]")
+
+
+class _TooDeep(Exception):
+    """Raised by the composer past :data:`MAX_DEPTH` (carries the position)."""
+
+    def __init__(self, mark) -> None:
+        super().__init__(mark)
+        self.mark = mark
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader whose composer refuses nesting deeper than :data:`MAX_DEPTH`."""
+
+    def __init__(self, stream) -> None:
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise _TooDeep(self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def _bracket_depth_line(text: str) -> int | None:
+    """1-based line where flow brackets (``[``, ``{``) first nest deeper than :data:`MAX_DEPTH`, else None.
+
+    A raw count (brackets inside strings count too): PyYAML's scanner is
+    quadratic in the nesting of flow collections, so they are bounded before it runs.
+    """
+    depth = 0
+    for match in _BRACKETS.finditer(text):
+        depth = depth + 1 if match.group() in "[{" else max(depth - 1, 0)
+        if depth > MAX_DEPTH:
+            return text.count("\n", 0, match.start()) + 1
+    return None
+
+
+def _children(node: yaml.Node) -> list:
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    return []
+
+
+def _expansion_problem(root: yaml.Node) -> tuple[str, str, int] | None:
+    """``(allowed, given, line)`` if the node graph, aliases expanded, is too big, too deep or cyclic.
+
+    Iterative depth-first walk with one memo entry per distinct node, so the
+    cost is the size of the *file*, not of its expansion.
+    """
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    on_path: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            kids = _children(node)
+            size[key] = 1 + sum(size[id(k)] for k in kids)
+            depth[key] = 1 + max((depth[id(k)] for k in kids), default=0)
+            on_path.discard(key)
+            line = node.start_mark.line + 1
+            if size[key] > MAX_EXPANDED_NODES:
+                return (f"at most {MAX_EXPANDED_NODES} YAML values once its aliases (*name) are "
+                        f"expanded", f"more than {MAX_EXPANDED_NODES} (the value at line {line} alone expands to "
+                        f"{size[key]})", line)
+            if depth[key] > MAX_DEPTH:
+                return (f"nested at most {MAX_DEPTH} levels deep, aliases (*name) expanded",
+                        f"a value nested deeper (at line {line})", line)
+            continue
+        if key in size:
+            continue
+        if key in on_path:
+            line = node.start_mark.line + 1
+            return ("free of recursive aliases (an anchor used inside its own value)",
+                    f"a recursive alias (the value at line {line} contains itself)", line)
+        on_path.add(key)
+        stack.append((node, True))
+        for kid in _children(node):
+            if id(kid) not in size:
+                stack.append((kid, False))
+    return None
 
 
 class _Walker:
@@ -210,12 +314,31 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         every problem found, each naming ``source``, the line, the field path,
         what is allowed and the value given.
     """
-    loader = yaml.SafeLoader(text)
+    if not isinstance(text, str):
+        raise _fail(source, None, "YAML text (str)", show(text))
+    if len(text) > MAX_FILE_BYTES:
+        raise _fail(source, None, f"a scenario file of at most {MAX_FILE_BYTES} characters",
+                    f"{len(text)} characters")
+    deep_line = _bracket_depth_line(text)
+    if deep_line is not None:
+        raise _fail(source, deep_line, f"nested at most {MAX_DEPTH} levels deep", "brackets nested deeper")
     try:
-        root = loader.get_single_node()
+        loader = _BoundedLoader(text)
+    except yaml.YAMLError as exc:  # e.g. a control character the YAML reader refuses
+        raise _fail(source, None, f"well-formed YAML ({exc})".replace("\n", " "), "unreadable text") from None
+    try:
+        try:
+            root = loader.get_single_node()
+        except _TooDeep as exc:
+            raise _fail(source, exc.mark.line + 1, f"nested at most {MAX_DEPTH} levels deep",
+                        "a value nested deeper") from None
         keys = ", ".join(f.name for f in dataclasses.fields(Scenario))
         if root is None:
             raise _fail(source, 1, f"a mapping with the keys {keys}", "an empty document")
+        problem = _expansion_problem(root)
+        if problem is not None:
+            allowed, given, line = problem
+            raise _fail(source, line, allowed, given)
         walker = _Walker(source, loader)
         if not isinstance(root, yaml.MappingNode):
             raise _fail(source, root.start_mark.line + 1, f"a mapping with the keys {keys}",
@@ -229,12 +352,14 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else None
         lines = text.splitlines()
-        got = repr(lines[line - 1].strip()) if line is not None and 0 < line <= len(lines) else "unreadable text"
+        got = show(lines[line - 1].strip()) if line is not None and 0 < line <= len(lines) else "unreadable text"
         reason = " ".join(str(x) for x in (exc.context, exc.problem) if x)
         col = f", column {mark.column + 1}" if mark is not None else ""
         raise _fail(source, line, f"well-formed YAML ({reason}{col})", f"the line {got}") from None
     except yaml.YAMLError as exc:
         raise _fail(source, None, f"well-formed YAML ({exc})", "unreadable text") from None
+    except RecursionError:  # defence in depth: the bounds above should make this unreachable
+        raise _fail(source, None, f"nested at most {MAX_DEPTH} levels deep", "a value nested deeper") from None
     finally:
         loader.dispose()
 
@@ -271,6 +396,9 @@ def load_scenario_file(path: str | Path) -> Scenario:
     """
     path = Path(path)
     try:
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise ScenarioError(f"{path}: the scenario file must be at most {MAX_FILE_BYTES} bytes. Got "
+                                f"{path.stat().st_size} bytes instead.")
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         reason = getattr(exc, "strerror", None) or str(exc)

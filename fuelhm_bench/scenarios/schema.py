@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -50,7 +51,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from fuelhm_bench.errors import FuelHMError, ParameterError
+from fuelhm_bench.errors import FuelHMError, ParameterError, ScenarioError
 from fuelhm_bench.flights.fleet import FleetConfig
 from fuelhm_bench.flights.mission import MissionProfile
 from fuelhm_bench.flights.schedule import GROWTH_LAWS, ModeSchedule
@@ -68,6 +69,21 @@ SUPPORTED_SCHEMA_VERSIONS: tuple[int, ...] = (1,)
 FIDELITIES: tuple[str, ...] = ("physics", "surrogate")
 #: Kinds of nominal-parameter drift.
 DRIFT_CHANGES: tuple[str, ...] = ("relative", "absolute")
+#: Upper bound of the units of a fleet (scored or training).
+MAX_UNITS: int = 10_000
+#: Upper bound of the flights per unit of a fleet.
+MAX_FLIGHTS_PER_UNIT: int = 10_000
+#: Upper bound of a flight's duration [min] (24 h).
+MAX_DURATION_MIN: float = 1440.0
+#: Run budget without an explicit opt-in [flight-hours, training + scored fleets]; the largest
+#: shipped scenario needs about 470.
+DEFAULT_RUN_BUDGET_FLIGHT_HOURS: float = 2000.0
+#: Environment variable that raises (or lowers) the default run budget [flight-hours].
+RUN_BUDGET_ENV: str = "FUELHM_RUN_BUDGET_FLIGHT_HOURS"
+#: Simulation time per flight-hour at 100 Hz on one core [s], the fast path's benchmark
+#: (``tests/bench_physics.py``: 35.8-36.5 ms per flight-hour, see the README); used only to
+#: print an order of magnitude of a run's cost. It scales with the frame rate.
+SECONDS_PER_FLIGHT_HOUR_100HZ: float = 0.036
 #: Scenario names: lowercase identifiers (the ``-vN`` suffix is reserved for versions).
 NAME_PATTERN = r"[a-z][a-z0-9_]*"
 
@@ -135,6 +151,68 @@ def drift_parameter_paths(effect_ids: Iterable[str] = ()) -> tuple[str, ...]:
     return tuple(p for p in paths if p not in _DRIFT_EXCLUDED)
 
 
+@dataclass(frozen=True)
+class RunCost:
+    """Estimated cost of a scenario run.
+
+    Parameters
+    ----------
+    flight_hours : float
+        Simulated flight time of the training and scored fleets [h].
+    frame_rate_hz : float
+        Simulation frame rate [Hz].
+    """
+
+    flight_hours: float
+    frame_rate_hz: float
+
+    @property
+    def seconds(self) -> float:
+        """Approximate simulation time on one core [s] (indicators and methods come on top)."""
+        return self.flight_hours * SECONDS_PER_FLIGHT_HOUR_100HZ * self.frame_rate_hz / 100.0
+
+    def describe(self) -> str:
+        """``"about 3.2 h of simulation on one core"``."""
+        s = self.seconds
+        text = f"{s:.0f} s" if s < 120 else f"{s / 60:.0f} min" if s < 7200 else (
+            f"{s / 3600:.1f} h" if s < 172800 else f"{s / 86400:.0f} days")
+        return f"about {text} of simulation on one core at {self.frame_rate_hz:g} Hz"
+
+
+def run_budget(declared: float | None = None) -> tuple[float, str]:
+    """The run budget [flight-hours] and where it comes from.
+
+    Parameters
+    ----------
+    declared : float or None, default=None
+        A scenario's ``run_budget_flight_hours``.
+
+    Returns
+    -------
+    budget : float
+    origin : str
+        ``"run_budget_flight_hours"``, the environment variable or ``"the default"``.
+
+    Raises
+    ------
+    ScenarioError
+        If the environment variable is set but is not a number > 0.
+    """
+    if declared is not None:
+        return float(declared), "run_budget_flight_hours in the file"
+    text = os.environ.get(RUN_BUDGET_ENV, "").strip()
+    if not text:
+        return DEFAULT_RUN_BUDGET_FLIGHT_HOURS, "the default"
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (math.isfinite(value) and value > 0):
+        raise ScenarioError(f"The environment variable {RUN_BUDGET_ENV} must be a number of flight-hours > 0. "
+                            f"Got {show(text)} instead.")
+    return value, f"{RUN_BUDGET_ENV}={text}"
+
+
 # ----------------------------------------------------------------------------- sections
 @dataclass(frozen=True, kw_only=True)
 class FleetSpec(Spec):
@@ -143,17 +221,17 @@ class FleetSpec(Spec):
     Parameters
     ----------
     units : int
-        Number of units (actuation loops) in the scored fleet, >= 1.
+        Number of units (actuation loops) in the scored fleet, in [1, 10000].
     flights_per_unit : int
-        Flights flown by each unit, >= 1; degradation onsets are indices into them.
+        Flights flown by each unit, in [1, 10000]; degradation onsets are indices into them.
     dispersion_scale : float, default=1.0
         Multiplies every standard deviation of the manufacturing dispersion
         (:class:`~fuelhm_bench.physics.model.Dispersion`), in [0, 10]; 0 gives
         identical units. Also used for the training fleet.
     """
 
-    units: int = option(ge=1)
-    flights_per_unit: int = option(ge=1)
+    units: int = option(ge=1, le=MAX_UNITS)
+    flights_per_unit: int = option(ge=1, le=MAX_FLIGHTS_PER_UNIT)
     dispersion_scale: float = option(Dispersion().scale, ge=0.0, le=10.0)
 
 
@@ -164,7 +242,7 @@ class MissionSpec(Spec):
     Parameters
     ----------
     duration_min : float, default=60.0
-        Flight duration [min], at least ``(start_duration_s + 60) / 60``.
+        Flight duration [min], at least ``(start_duration_s + 60) / 60``, at most 1440 (24 h).
     frame_rate_hz : float, default=100.0
         FADEC frame (and recording) rate [Hz], in [1, 10000]; sets the
         controller frame of the model too.
@@ -201,7 +279,7 @@ class MissionSpec(Spec):
         "engine_time_constant_s": ("engine_time_constant_s", float),
     }
 
-    duration_min: float = option(_MP.duration_s / 60.0, gt=0.0)
+    duration_min: float = option(_MP.duration_s / 60.0, gt=0.0, le=MAX_DURATION_MIN)
     frame_rate_hz: float = option(1.0 / _MP.frame_s, ge=1.0, le=1e4)
     start_duration_s: float = option(_MP.start_duration_s, ge=20.0, le=600.0)
     test_sweep: bool = option(_MP.test_sweep)
@@ -417,13 +495,13 @@ class TrainingSpec(Spec):
     Parameters
     ----------
     units : int
-        Number of healthy training units, >= 1 (manufactured with the training seed).
+        Number of healthy training units, in [1, 10000] (manufactured with the training seed).
     flights_per_unit : int
-        Healthy flights per training unit, >= 1.
+        Healthy flights per training unit, in [1, 10000].
     """
 
-    units: int = option(ge=1)
-    flights_per_unit: int = option(ge=1)
+    units: int = option(ge=1, le=MAX_UNITS)
+    flights_per_unit: int = option(ge=1, le=MAX_FLIGHTS_PER_UNIT)
 
     @property
     def n_flights(self) -> int:
@@ -563,6 +641,12 @@ class Scenario(Spec):
         surrogate (a faster approximation, where a runner provides one).
     costs : CostSpec, default=CostSpec()
         Cost model behind rewards (kUSD).
+    run_budget_flight_hours : float or None, default=null
+        Opt-in for a large run [flight-hours], > 0: a scenario whose estimated
+        cost (flight-hours of the training and scored fleets) exceeds the run
+        budget is refused with its estimate; the budget is this value when
+        given, else the FUELHM_RUN_BUDGET_FLIGHT_HOURS environment variable,
+        else 2000. It does not change simulated data or scores.
 
     Examples
     --------
@@ -591,6 +675,7 @@ class Scenario(Spec):
     seeds: SeedSpec = option()
     fidelity: str = option("physics", choices=FIDELITIES)
     costs: CostSpec = option(default_factory=CostSpec)
+    run_budget_flight_hours: float | None = option(None, gt=0.0)
 
     # ------------------------------------------------------------------ identity
     @property
@@ -651,8 +736,28 @@ class Scenario(Spec):
                            seed=self.seeds.test_seed)
 
     # ------------------------------------------------------------------ checks
+    def run_cost(self) -> RunCost:
+        """Estimated cost of a run of this scenario (both fleets simulated once)."""
+        return RunCost(
+            flight_hours=(self.fleet.units * self.fleet.flights_per_unit
+                          + self.training.units * self.training.flights_per_unit) * self.mission.duration_min / 60.0,
+            frame_rate_hz=self.mission.frame_rate_hz)
+
+    def _budget_checks(self) -> Iterator[Problem]:
+        cost = self.run_cost()
+        budget, origin = run_budget(self.run_budget_flight_hours)
+        if cost.flight_hours <= budget:
+            return
+        fleets = (f"scored fleet {self.fleet.units} units x {self.fleet.flights_per_unit} flights + training "
+                  f"{self.training.units} x {self.training.flights_per_unit}, {self.mission.duration_min:g} min each")
+        yield Problem("fleet", f"a run within the budget of {budget:g} flight-hours ({origin})",
+                      f"{cost.flight_hours:.4g} flight-hours ({fleets}; {cost.describe()})",
+                      f"To allow it, set run_budget_flight_hours: {math.ceil(cost.flight_hours)} in the file or "
+                      f"the environment variable {RUN_BUDGET_ENV}.",
+                      near=("fleet.units", "training.units"))
+
     def _checks(self) -> Iterable[Problem]:
-        problems = list(self._schedule_checks()) + list(self._effect_checks())
+        problems = list(self._schedule_checks()) + list(self._effect_checks()) + list(self._budget_checks())
         if not problems:
             problems += self._drift_checks()
         if not problems:
@@ -688,14 +793,45 @@ class Scenario(Spec):
         probs = [d.probability for d in self.degradations]
         total = math.fsum(probs) + self.healthy_probability
         if not math.isclose(total, 1.0, rel_tol=0.0, abs_tol=1e-9):
-            terms = " + ".join(f"{p:g}" for p in probs + [self.healthy_probability])
-            rest = 1.0 - math.fsum(probs)
-            hint = (f"healthy_probability: {rest:g} would make them sum to 1." if rest >= 0.0 else
-                    f"The degradation probabilities alone sum to {1.0 - rest:g} > 1.")
-            yield Problem("healthy_probability",
-                          f"such that the degradation probabilities plus healthy_probability sum to 1 when "
-                          f"simultaneous is false ({terms} = {total:g})",
-                          show(self.healthy_probability), hint, near=("simultaneous",))
+            yield self._probability_sum_problem(probs, total)
+
+    def _probability_sum_problem(self, probs: list[float], total: float) -> Problem:
+        """Blame the field the user changed for a probability sum that is not 1.
+
+        Against the shipped scenario of the same name (when there is one), the
+        changed probability is blamed; otherwise ``healthy_probability`` when the
+        degradations alone leave room for it, else the largest degradation
+        probability. The message lists every term by its field.
+        """
+        fields = [f"degradations[{i}].probability" for i in range(len(probs))] + ["healthy_probability"]
+        values = probs + [self.healthy_probability]
+        terms = " + ".join(f"{v:g}" for v in values) + f" = {total:g}: " + " + ".join(fields)
+        shipped = _shipped_probabilities(self.name)
+        blamed = None
+        if shipped is not None:
+            mine = {d.mode: d.probability for d in self.degradations}
+            mine["healthy_probability"] = self.healthy_probability
+            changed = [k for k in mine if k in shipped and not math.isclose(mine[k], shipped[k], abs_tol=1e-12)]
+            if changed:
+                key = changed[0]
+                blamed = ("healthy_probability" if key == "healthy_probability" else
+                          fields[[d.mode for d in self.degradations].index(key)])
+                others = 1.0 - (total - mine[key])
+                hint = (f"{blamed} was {shipped[key]:g} in the shipped {self.name}; "
+                        + (f"{others:g} would make the sum 1." if 0.0 <= others <= 1.0 else
+                           "the other probabilities alone leave no room for it."))
+        rest = 1.0 - math.fsum(probs)
+        if blamed is None and rest >= 0.0:
+            blamed, hint = "healthy_probability", f"healthy_probability: {rest:g} would make them sum to 1."
+        elif blamed is None:
+            i = max(range(len(probs)), key=probs.__getitem__)
+            blamed = fields[i]
+            hint = (f"The degradation probabilities alone sum to {1.0 - rest:g} > 1; lower one of them "
+                    f"({blamed} is the largest).")
+        given = values[fields.index(blamed)]
+        return Problem(blamed, f"such that the degradation probabilities plus healthy_probability sum to 1 when "
+                               f"simultaneous is false ({terms})",
+                       show(given), hint, near=("simultaneous",))
 
     def _effect_checks(self) -> Iterator[Problem]:
         seen: dict[str, int] = {}
@@ -762,6 +898,23 @@ class Scenario(Spec):
                 if target == phys:
                     return _physics_problem(exc, f"{name}.{field}", getattr(section, field))
         return _physics_problem(exc, "mission", self.mission.to_dict())
+
+
+def _shipped_probabilities(name: str) -> dict[str, float] | None:
+    """``{mode: probability, "healthy_probability": p}`` of the shipped scenario ``name``, read raw (no validation)."""
+    import yaml
+
+    from fuelhm_bench.scenarios.registry import shipped_scenario_files
+
+    try:
+        entry = shipped_scenario_files().get(name)
+        raw = yaml.safe_load(entry.read_text(encoding="utf-8")) if entry is not None else None
+        out = {d["mode"]: float(d["probability"]) for d in raw.get("degradations") or []}
+        if raw.get("healthy_probability") is not None:
+            out["healthy_probability"] = float(raw["healthy_probability"])
+        return out
+    except Exception:  # no shipped baseline to compare with: blame by the rule
+        return None
 
 
 def _drift_allowed_text(path: str, effect_ids: list[str]) -> str:

@@ -7,15 +7,14 @@ import numbers
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.errors import ParameterError, parameter_error
 from fuelhm_bench.taxonomy import MODE_IDS
 
 __all__ = ["ScoringConfig"]
 
 
 def _err(name: str, allowed: str, given: Any) -> ParameterError:
-    return ParameterError(f"The '{name}' parameter of ScoringConfig must be {allowed}. "
-                          f"Got {given!r} instead.")
+    return parameter_error(name, "ScoringConfig", allowed, given)
 
 
 def _is_real(x: Any) -> bool:

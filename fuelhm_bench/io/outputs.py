@@ -1,0 +1,238 @@
+"""The one rule for writing outputs: never overwrite without ``--force``, publish atomically.
+
+Every command that writes a file or a directory of results goes through this
+module, so the rule and its messages are the same everywhere:
+
+* an existing output is refused unless ``force`` (``--force``) is given;
+* missing parent directories are created; a parent path that is a *file*, a
+  directory where a file is expected, or an unwritable directory is refused
+  with a message naming the option, the path and the offending component;
+* data is written to a hidden temporary file in the target directory and
+  renamed onto the target only on success (:func:`atomic_output`), so an
+  interrupted run (Ctrl-C, crash) never leaves a partial file that looks
+  complete.
+
+API
+---
+:func:`check_output_path`
+    Check (and prepare the parents of) one output file.
+:func:`check_output_dir`
+    Check (and create) an output directory; with ``names`` it refuses
+    existing files of those names unless ``force``.
+:func:`atomic_output`
+    Context manager yielding a temporary path to write to; renames it onto the
+    target on success, deletes it on any exception (``KeyboardInterrupt`` too).
+:func:`write_text`
+    Atomic text file (e.g. JSON, YAML, Markdown).
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> d = pathlib.Path(tempfile.mkdtemp())
+>>> with atomic_output(d / "a.txt", force=False) as tmp:
+...     _ = tmp.write_text("hello")
+>>> (d / "a.txt").read_text()
+'hello'
+>>> try:
+...     write_text(d / "a.txt", "again", force=False)
+... except OutputPathError as exc:
+...     print(exc)  # doctest: +ELLIPSIS
+The output file '...a.txt' already exists; refusing to overwrite it (pass --force to replace it; overwrite=True from Python).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import uuid
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+from fuelhm_bench.errors import OutputPathError
+
+__all__ = ["atomic_output", "check_output_dir", "check_output_path", "temporary_path", "write_text"]
+
+
+def _label(option: str | None, what: str, path: Path) -> str:
+    return f"{option} {path}" if option else f"the {what} '{path}'"
+
+
+def _blocking_file(path: Path) -> Path | None:
+    """The first ancestor of ``path`` that exists and is not a directory, if any."""
+    for parent in reversed(path.parents):
+        if parent.exists() and not parent.is_dir():
+            return parent
+    return None
+
+
+def _make_parent(path: Path, option: str | None, what: str) -> None:
+    blocker = _blocking_file(path)
+    if blocker is not None:
+        raise OutputPathError(
+            f"Cannot write {_label(option, what, path)}: cannot create its directory '{path.parent}' "
+            f"because '{blocker}' is a file, not a directory. Choose another path.")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputPathError(
+            f"Cannot write {_label(option, what, path)}: cannot create its directory "
+            f"'{path.parent}' ({exc.strerror or exc}).") from None
+    if not os.access(path.parent, os.W_OK):
+        raise OutputPathError(f"Cannot write {_label(option, what, path)}: the directory '{path.parent}' is "
+                              "not writable (permission denied).")
+
+
+def check_output_path(path: str | os.PathLike[str], *, overwrite: bool, what: str = "output file",
+                      option: str | None = None) -> Path:
+    """Check that ``path`` may be written and create its parent directories.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Target file.
+    overwrite : bool
+        Whether an existing file may be replaced (``--force``).
+    what : str, default="output file"
+        Noun used in messages when no option is given.
+    option : str or None, default=None
+        Command-line option the path came from (e.g. ``"--out"``), named in messages.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    OutputPathError
+        ``path`` is a directory, exists while ``overwrite`` is false, lies
+        below a file, or its directory cannot be created or written.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputPathError(f"Cannot write {_label(option, what, path)}: it is a directory; give a file name.")
+    if path.exists() and not overwrite:
+        raise OutputPathError(f"The {what} '{path}' already exists; refusing to overwrite it (pass --force to "
+                              "replace it; overwrite=True from Python).")
+    _make_parent(path, option, what)
+    return path
+
+
+def check_output_dir(path: str | os.PathLike[str], *, force: bool = True, names: Iterable[str] = (),
+                     option: str | None = "--out") -> Path:
+    """Check and create an output directory.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The directory.
+    force : bool, default=True
+        Whether files listed in ``names`` that already exist may be replaced.
+    names : iterable of str, default=()
+        Files the command will write in the directory; without ``force`` any
+        that exists is refused (all of them named in one message).
+    option : str or None, default="--out"
+        Option named in messages.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    OutputPathError
+        ``path`` (or an ancestor) is a file, cannot be created or written, or
+        holds one of ``names`` while ``force`` is false.
+    """
+    path = Path(path)
+    label = _label(option, "output directory", path)
+    if path.exists() and not path.is_dir():
+        raise OutputPathError(f"Cannot use {label}: it is a file, not a directory.")
+    blocker = _blocking_file(path / "x")
+    if blocker is not None:
+        raise OutputPathError(f"Cannot use {label}: '{blocker}' is a file, not a directory.")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputPathError(f"Cannot create {label}: {exc.strerror or exc}.") from None
+    if not os.access(path, os.W_OK):
+        raise OutputPathError(f"Cannot write to {label} (permission denied).")
+    existing = [n for n in names if (path / n).exists()]
+    if existing and not force:
+        raise OutputPathError(f"{path} already holds {', '.join(existing)}; refusing to overwrite "
+                              "(pass --force).")
+    return path
+
+
+def temporary_path(path: Path) -> Path:
+    """A hidden, unique sibling of ``path`` that keeps its full suffix (``.x.csv.gz``)."""
+    return path.with_name(f".tmp-{uuid.uuid4().hex[:12]}-{path.name}")
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike[str], *, force: bool, what: str = "output file",
+                  option: str | None = None) -> Iterator[Path]:
+    """Write ``path`` atomically: yield a temporary path, rename it onto ``path`` on success.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Target file (checked by :func:`check_output_path` first).
+    force : bool
+        Whether an existing target may be replaced.
+    what, option
+        As for :func:`check_output_path`.
+
+    Yields
+    ------
+    pathlib.Path
+        Temporary file in the target directory, with the target's suffixes (so
+        writers that choose a format by suffix work). The caller writes it.
+
+    Raises
+    ------
+    OutputPathError
+        As :func:`check_output_path`, or when nothing was written to the
+        temporary path, or the rename fails. On any exception (including
+        ``KeyboardInterrupt``) the temporary file is deleted and the target is
+        left as it was.
+    """
+    target = check_output_path(path, overwrite=force, what=what, option=option)
+    tmp = temporary_path(target)
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise OutputPathError(f"Nothing was written to {_label(option, what, target)}.")
+        check_output_path(target, overwrite=force, what=what, option=option)  # appeared meanwhile?
+        os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OutputPathError):
+            raise
+        raise OutputPathError(f"Cannot write {_label(option, what, target)}: {exc.strerror or exc}.") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text(path: str | os.PathLike[str], text: str, *, force: bool, what: str = "output file",
+               option: str | None = None) -> Path:
+    """Write a text file atomically (UTF-8) under the overwrite rule.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Target file.
+    text : str
+        Content.
+    force : bool
+        Whether an existing file may be replaced.
+    what, option
+        As for :func:`check_output_path`.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    with atomic_output(path, force=force, what=what, option=option) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
