@@ -260,8 +260,10 @@ def diagnosability_report(doe_table: pd.DataFrame, healthy_table: pd.DataFrame, 
     features = check_features(features, "diagnosability_report")
     deltas = paired_deltas(doe_table, features=features)
     healthy = indicator_matrix(healthy_table, features, "healthy table")
-    with np.errstate(invalid="ignore"):
-        std = np.nanstd(healthy, axis=0, ddof=1)
+    n_ok = np.isfinite(healthy).sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.nansum(healthy, axis=0) / np.maximum(n_ok, 1)
+        std = np.sqrt(np.nansum((healthy - mean) ** 2, axis=0) / (n_ok - 1))
     std = np.where(np.isfinite(std) & (std > 0), std, np.nan)
     modes = [m for m in MODE_IDS if (deltas["mode"] == m).any()]
     law_rows, mode_rows, sig_rows = [], [], []
@@ -277,8 +279,10 @@ def diagnosability_report(doe_table: pd.DataFrame, healthy_table: pd.DataFrame, 
         z_lin = lin["A"] * smax / std
         z_pow = pw["c"] * smax ** pw["p"] / std
         top = s.max()
-        with np.errstate(invalid="ignore"):
-            observed = np.nanmean(np.where(np.isfinite(d[s == top]), d[s == top], np.nan), axis=0) / std
+        at_top = d[s == top]
+        n_top = np.isfinite(at_top).sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            observed = np.where(n_top > 0, np.nansum(at_top, axis=0) / np.maximum(n_top, 1), np.nan) / std
         for j, f in enumerate(features):
             law_rows.append({"mode": mode, "indicator": f, "A": lin["A"][j], "r2_linear": lin["r2"][j],
                              "c": pw["c"][j], "p": pw["p"][j], "r2_power": pw["r2"][j],
