@@ -60,7 +60,10 @@ def fit_power_law(intensity: np.ndarray, delta: np.ndarray) -> dict[str, np.ndar
     of squares is kept (the first one on ties, so an exact line gives ``p = 1``). The law is
     monotone in ``s`` and passes through the origin, as a degradation law must (no change
     without degradation); ``p < 1`` describes a response that saturates (a step-like change
-    at small ``p``), ``p > 1`` one that accelerates.
+    at small ``p``), ``p > 1`` one that accelerates. With intensities 0.25, 0.5, 0.75, 1 and no
+    noise, ``dI = 1 - exp(-5 s)`` gets R² 0.91 (the line: -5.3) and ``dI = sqrt(s)`` 1.00 (the
+    line: 0.39). A pure step (the same change at every intensity) has no spread to explain: no
+    law, linear or not, gets a centred R² above that of a constant; its ``|Z|`` is still right.
 
     Parameters
     ----------
