@@ -19,8 +19,8 @@ Version history
 ---------------
 v1
     Physics v2 (issue 11): operating excitation without per-frame N2 dither, degradation
-    laws as mechanisms, re-sized scenarios (every shipped scenario at version 2); the
-    observation may carry the extended indicator columns. Scores of v0 are not comparable.
+    laws as mechanisms, re-sized scenarios (every shipped scenario at version 2). Scores of
+    v0 are not comparable.
 v0
     Initial version (retired).
 

@@ -215,9 +215,10 @@ class ActuationLoopEnv(gym.Env):
 
     * v1: physics v2 (issue 11): no per-frame N2 dither in the operating excitation, the seven
       degradation laws act on the physical element that degrades, every shipped scenario at
-      version 2 (all_modes with >= 15 faulty units per mode, larger training fleets for threshold
-      calibration, robustness_drift with faults outside the seven modes). Observations and
-      rewards differ from v0 for the same arguments.
+      version 2 (all_modes with >= 15 faulty units per mode). Observations and rewards differ
+      from v0 for the same arguments. The observation still holds the paper's ten indicators;
+      the extended indicators are columns of the indicator tables (training, DOE), not yet of
+      the observation.
     * v0: initial version (surrogate with unit/flight variance split; guilt not rewarded). Retired:
       ``gym.make("FuelHM/ActuationLoop-v0")`` raises ``DeprecatedEnv`` naming v1.
 
