@@ -62,6 +62,8 @@ def test_report_largest_z_per_mode(report):
     true_z = 2.0 * (1.0 - np.exp(-2.5)) / DEFAULT_STD["G_null"]
     assert m.loc["radial_clearance", "z_max"] == pytest.approx(true_z, rel=0.08)
     assert m.loc["radial_clearance", "z_max_linear"] < 0.8 * true_z
+    assert m.loc["radial_clearance", "p_at_z_max"] < 0.5 and m.loc["radial_clearance", "r2_power_at_z_max"] > 0.85
+    assert m.loc["null_bias_drift", "r2_linear_at_z_max"] > 0.99
 
 
 def test_report_r2_of_each_law_form(report):
@@ -91,5 +93,5 @@ def test_report_files(report, tmp_path):
     assert data["all_visible"] is False and len(data["modes"]) == 4
     assert data["similar_pairs"][0][:2] == ["filter_contamination", "null_bias_drift"]
     md = paths[0].read_text()
-    assert "| backlash | 1 | 3." in md and "**no**" in md
+    assert "| backlash | 1 | 3." in md and "**no**" in md and "exponent p" in md
     assert len(pd.read_csv(paths[2])) == 40

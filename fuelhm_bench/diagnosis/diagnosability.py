@@ -125,6 +125,7 @@ class DiagnosabilityReport:
         The indicators.
     modes : pandas.DataFrame
         One row per mode: ``mode``, ``max_intensity``, ``z_max`` (better form), ``z_max_indicator``,
+        ``r2_linear_at_z_max``, ``r2_power_at_z_max`` and ``p_at_z_max`` (the laws of that indicator),
         ``z_max_linear`` (the paper's linear law), ``z_max_observed`` (no law), ``max_cosine``,
         ``closest_mode``, ``visible`` (``z_max >= z_target``), ``distinguishable``
         (``max_cosine <= cosine_limit``).
@@ -174,11 +175,12 @@ class DiagnosabilityReport:
         lines = [f"## Diagnosability: {self.name} indicator set ({len(self.features)} indicators)", "",
                  f"Indicators: {', '.join(self.features)}. Target: |Z|max >= {self.z_target:g} at the maximum "
                  f"intensity, no signature pair with cosine > {self.cosine_limit:g}.", "",
-                 "| mode | s_max | abs(Z)max (monotone law) | on | abs(Z)max (linear law) | abs(Z)max observed "
-                 "| max cosine | with | visible | distinguishable |",
-                 "|---|---|---|---|---|---|---|---|---|---|"]
+                 "| mode | s_max | abs(Z)max (monotone law) | on | its R² (monotone, linear) | exponent p "
+                 "| abs(Z)max (linear law) | abs(Z)max observed | max cosine | with | visible | distinguishable |",
+                 "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in self.modes.itertuples():
             lines.append(f"| {r.mode} | {r.max_intensity:g} | {r.z_max:.1f} | {r.z_max_indicator} | "
+                         f"{r.r2_power_at_z_max:.2f}, {r.r2_linear_at_z_max:.2f} | {r.p_at_z_max:.2g} | "
                          f"{r.z_max_linear:.1f} | {r.z_max_observed:.1f} | {r.max_cosine:.2f} | {r.closest_mode} | "
                          f"{'yes' if r.visible else '**no**'} | {'yes' if r.distinguishable else '**no**'} |")
         lines += ["", "Cosine similarity of the signatures:", "",
@@ -295,6 +297,9 @@ def diagnosability_report(doe_table: pd.DataFrame, healthy_table: pd.DataFrame, 
         mode_rows.append({"mode": mode, "max_intensity": smax,
                           "z_max": float(abs_pow[k]) if k >= 0 else math.nan,
                           "z_max_indicator": features[k] if k >= 0 else "",
+                          "r2_linear_at_z_max": float(lin["r2"][k]) if k >= 0 else math.nan,
+                          "r2_power_at_z_max": float(pw["r2"][k]) if k >= 0 else math.nan,
+                          "p_at_z_max": float(pw["p"][k]) if k >= 0 else math.nan,
                           "z_max_linear": float(np.nanmax(np.abs(z_lin))) if np.isfinite(z_lin).any() else math.nan,
                           "z_max_observed": (float(np.nanmax(np.abs(observed)))
                                              if np.isfinite(observed).any() else math.nan)})
