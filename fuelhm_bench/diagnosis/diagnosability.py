@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.optimize import minimize_scalar
 
 from fuelhm_bench.diagnosis._validation import check_features, indicator_matrix, param_error
 from fuelhm_bench.diagnosis.itl import fit_through_origin, paired_deltas
@@ -57,7 +58,9 @@ def fit_power_law(intensity: np.ndarray, delta: np.ndarray) -> dict[str, np.ndar
 
     For each exponent ``p`` of :data:`POWER_GRID` (0.05 to 8, 1 included) the best ``c`` has
     the closed form ``sum(s**p dI) / sum(s**2p)``; the exponent with the smallest residual sum
-    of squares is kept (the first one on ties, so an exact line gives ``p = 1``). The law is
+    of squares is kept (the first one on ties, so an exact line gives ``p = 1``) and refined by a
+    bounded scalar minimisation between its grid neighbours (kept only if it lowers the residual;
+    ``p`` stays within [0.05, 8]). The law is
     monotone in ``s`` and passes through the origin, as a degradation law must (no change
     without degradation); ``p < 1`` describes a response that saturates (a step-like change
     at small ``p``), ``p > 1`` one that accelerates. With intensities 0.25, 0.5, 0.75, 1 and no
@@ -108,8 +111,20 @@ def fit_power_law(intensity: np.ndarray, delta: np.ndarray) -> dict[str, np.ndar
         ssr = ((d[None, :] - c[:, None] * basis) ** 2).sum(axis=1)
         # Round to absorb floating-point noise between equivalent exponents (exact laws).
         k = int(np.argmin(np.round(ssr, 12)))
-        out["c"][j], out["p"][j] = c[k], POWER_GRID[k]
-        out["r2"][j] = _r2(d, c[k] * basis[k])
+        best_p, best_ssr = float(POWER_GRID[k]), float(ssr[k])
+        if 0 < k < len(POWER_GRID) - 1:  # refine between the grid neighbours
+            def sse(q):
+                b_ = s ** q
+                return float(((d - (b_ @ d) / (b_ @ b_) * b_) ** 2).sum())
+
+            res = minimize_scalar(sse, bounds=(POWER_GRID[k - 1], POWER_GRID[k + 1]), method="bounded",
+                                  options={"xatol": 1e-7})
+            if res.success and res.fun < best_ssr - 1e-12 * max(best_ssr, 1e-300):
+                best_p, best_ssr = float(res.x), float(res.fun)
+        b_ = s ** best_p
+        c_best = float((b_ @ d) / (b_ @ b_))
+        out["c"][j], out["p"][j] = c_best, best_p
+        out["r2"][j] = _r2(d, c_best * b_)
     return out
 
 
