@@ -24,11 +24,19 @@ def test_all_modes_has_at_least_15_faulty_units_per_mode():
     assert healthy >= 15
 
 
+#: Scenarios whose point is scarce healthy data (their calibration split is one unit by design).
+SCARCE_DATA = ("low_data",)
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", list_scenarios())
+@pytest.mark.parametrize("name", [n for n in list_scenarios() if n not in SCARCE_DATA])
 def test_healthy_false_alarm_rate_at_a2_is_gaussian(name):
     """The paper method's threshold mu + 2 sigma, set on the calibration split of the healthy training
-    flights, gives a healthy false-alarm rate within 1.5 points of 2.3 % on the scored fleet (full size)."""
+    flights, gives a healthy false-alarm rate within 1.5 points of 2.3 % on the scored fleet (full size).
+
+    Measured on paper_2012 with the release physics: 5.9 % with 20 x 10 training flights (50 calibration
+    flights), 4.05 % with 40 x 10 (100), 9.2 % with 80 x 5 (100): more units help only with enough flights
+    per unit, and the scored fleet's healthy flights cluster by unit, so the rate itself is noisy."""
     from baselines.paper_mahalanobis import PaperMahalanobis
     from fuelhm_bench.evaluation import run_method, scenario_data
     from fuelhm_bench.scoring import Run, headline_kpis, score_run
