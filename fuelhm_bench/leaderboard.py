@@ -74,7 +74,8 @@ def evaluate_method(spec: str, method, evaluation, out: Path, *, method_seed: in
     model, robustness (for a drifting scenario), or the failure message.
     """
     from fuelhm_bench.runner import run_in_env
-    from fuelhm_bench.scoring import (headline_kpis, plot_score_distributions, robustness, robustness_table,
+    from fuelhm_bench.scoring import (error_rate_changes, headline_kpis, plot_score_distributions, robustness,
+                                      robustness_table,
                                       save_figure, write_tables)
 
     if progress_factory is not None:
@@ -102,6 +103,8 @@ def evaluate_method(spec: str, method, evaluation, out: Path, *, method_seed: in
         if nom.ok:
             nom_card = nom.score()
             kpis["robustness"] = robustness(nom_card, card)
+            changes = error_rate_changes(nom_card, card)  # the two error rates, separately
+            kpis["robustness_delta_fpr"], kpis["robustness_delta_fnr"] = changes["delta_fpr"], changes["delta_fnr"]
             robustness_table(nom_card, card).to_csv(mdir / "robustness.csv", index=False)
         else:
             entry["robustness_message"] = f"nominal run {nom.status}: {nom.message.splitlines()[0]}"
@@ -249,7 +252,8 @@ def run_leaderboard(config: LeaderboardConfig, out: Path, *, progress_factory=No
         board = board.sort_values(["scenario", "summary_score"], ascending=[True, False], na_position="last")
     board.to_csv(out / "leaderboard.csv", index=False)
     cols = [c for c in ("scenario", "seed", "method", "status", "summary_score", "fpr_standard_thr",
-                        "fnr_standard_thr", "fcr", "delay_censored_mean", "cost_kusd", "robustness") if c in board]
+                        "fnr_standard_thr", "fcr", "delay_censored_mean", "cost_kusd", "robustness",
+                        "robustness_delta_fpr", "robustness_delta_fnr") if c in board]
     (out / "leaderboard.md").write_text("# Leaderboard\n\nRanked by summary score (null method = 0, perfect = 100; "
                                         "docs/scoring.md).\n\n" + to_markdown(board[cols].round(3)) + "\n")
     return board

@@ -29,6 +29,22 @@ INDICATOR_UNITS: dict[str, str] = {
     "Hys0": "mA", "G_in": "mm/s/mA", "G_out": "mm/s/mA", "G_null": "mm/s/mA",
 }
 
+#: Model-free indicators beyond the paper (docs/indicators.md, "Extended indicators"), computed
+#: by the same extractors from the same binned velocity-gain curve. Not used by the paper's
+#: method unless asked for; exposed as extra columns with ``<name>_valid`` flags.
+EXTENDED_INDICATOR_NAMES: tuple[str, ...] = (
+    "V_in1", "V_out1", "V_in3", "V_out3", "V_in7", "V_out7", "Vsd_null", "Idle_frac",
+)
+
+#: Units of the extended indicators (velocities in mm/s; ``Idle_frac`` is a fraction).
+EXTENDED_INDICATOR_UNITS: dict[str, str] = {
+    "V_in1": "mm/s", "V_out1": "mm/s", "V_in3": "mm/s", "V_out3": "mm/s", "V_in7": "mm/s",
+    "V_out7": "mm/s", "Vsd_null": "mm/s", "Idle_frac": "1",
+}
+
+#: The paper's ten followed by the extended indicators: every name a table may carry.
+ALL_INDICATOR_NAMES: tuple[str, ...] = INDICATOR_NAMES + EXTENDED_INDICATOR_NAMES
+
 #: Optional physical effects a nominal model omits (docs/physics.md §7 Optional effects).
 EFFECT_IDS: tuple[str, ...] = (
     "spool_overlap",

@@ -1,4 +1,4 @@
-"""FuelHM/ActuationLoop-v0: conformance (check_env on every id x shipped scenario x fidelity), determinism,
+"""FuelHM/ActuationLoop-v1: conformance (check_env on every id x shipped scenario x fidelity), determinism,
 vectorisation, pickling, the cost model, truth handling, the surrogate against the physics, the knowledge
 cache and bad input.
 
@@ -32,7 +32,7 @@ from sizes import FLIGHT_MINUTES, TINY_FLIGHTS, TINY_UNITS, knowledge_size
 from fuelhm_bench.scenarios import CostSpec, DegradationSpec, list_scenarios, load_scenario
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 
-ENV_ID = "FuelHM/ActuationLoop-v0"
+ENV_ID = "FuelHM/ActuationLoop-v1"
 ENV_IDS = sorted(i for i in gym.registry if i.startswith("FuelHM/"))
 MINUTES = FLIGHT_MINUTES
 SMALL = knowledge_size()
@@ -94,10 +94,10 @@ def step_fault(mode, onset, *, growth="step", ramp=1):
 def test_registration_is_lazy_and_idempotent():
     code = ("import sys, gymnasium as gym, fuelhm_bench.envs as e; e.register_envs(); "
             "assert 'fuelhm_bench.envs.actuation_loop' not in sys.modules; "
-            "assert gym.spec('FuelHM/ActuationLoop-v0').entry_point.endswith(':ActuationLoopEnv'); print('ok')")
+            "assert gym.spec('FuelHM/ActuationLoop-v1').entry_point.endswith(':ActuationLoopEnv'); print('ok')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
-    assert ENV_IDS == ["FuelHM/ActuationLoop-v0"]
+    assert ENV_IDS == ["FuelHM/ActuationLoop-v1"]
 
 
 @pytest.mark.parametrize("fidelity", ["physics", "surrogate"])
@@ -112,8 +112,13 @@ def test_check_env_every_id_scenario_and_fidelity(cache_dir, env_id, scenario, f
 
 
 def test_unknown_version_names_the_current_one():
-    with pytest.raises(gym.error.Error, match="v0"):
-        gym.make("FuelHM/ActuationLoop-v1")
+    with pytest.raises(gym.error.Error, match="v1"):
+        gym.make("FuelHM/ActuationLoop-v2")
+
+
+def test_retired_version_names_the_current_one():
+    with pytest.raises(gym.error.DeprecatedEnv, match=r"v0.*deprecated.*FuelHM/ActuationLoop-v1"):
+        gym.make("FuelHM/ActuationLoop-v0")
 
 
 def test_make_with_module_prefix_and_path(cache_dir, tmp_path):
@@ -121,7 +126,7 @@ def test_make_with_module_prefix_and_path(cache_dir, tmp_path):
 
     path = tmp_path / "mine.yaml"
     path.write_text(yaml.safe_dump(small_scenario(name="mine").to_dict(), sort_keys=False))
-    env = gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v0", scenario=str(path), fidelity="physics",
+    env = gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v1", scenario=str(path), fidelity="physics",
                    flight_minutes=MINUTES)
     assert env.unwrapped.scenario.name == "mine"
     assert env.unwrapped.n_flights == 8
@@ -388,7 +393,7 @@ def test_knowledge_cache_memory_disk_and_fresh_build_agree(tmp_path):
     first = published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path)
     assert published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path) is first
     entries = list((tmp_path / "fuelhm-v1").iterdir())
-    assert len(entries) == 1 and entries[0].name.startswith("knowledge-paper_2012-v1-")
+    assert len(entries) == 1 and entries[0].name.startswith("knowledge-paper_2012-v2-")
     clear_memory_cache()
     from_disk = published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path)
     fresh = build_knowledge(knowledge_build(sc, flight_minutes=MINUTES, size=SMALL))

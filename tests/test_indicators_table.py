@@ -18,6 +18,9 @@ EXPECTED_COLUMNS = (
      "G_null"]
     + [f"{n}_valid" for n in ("X1", "Y1", "X2", "Y2", "Inb", "I0", "Hys0", "G_in", "G_out",
                               "G_null")]
+    + ["V_in1", "V_out1", "V_in3", "V_out3", "V_in7", "V_out7", "Vsd_null", "Idle_frac"]
+    + [f"{n}_valid" for n in ("V_in1", "V_out1", "V_in3", "V_out3", "V_in7", "V_out7", "Vsd_null",
+                              "Idle_frac")]
     + ["n_points", "quality_reason"]
 )
 

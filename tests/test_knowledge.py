@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -9,7 +11,7 @@ import pytest
 from fuelhm_bench.cli import main
 from fuelhm_bench.diagnosis.doe import DesignOfExperiments, run_doe
 from fuelhm_bench.flights.mission import MissionProfile
-from fuelhm_bench.taxonomy import INDICATOR_NAMES
+from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 
 SHORT = MissionProfile(duration_s=300.0)
 
@@ -99,3 +101,11 @@ def test_itl_command_writes_laws_and_signatures(tmp_path):
     assert (out / "signatures.png").stat().st_size > 5000 and (out / "itl.png").exists()
     assert "| mode |" in (out / "signatures.md").read_text()
     assert np.isfinite(sig.loc["null_bias_drift"].to_numpy()).all()
+    # The diagnosability report, for the paper's ten and the extended set, next to the laws.
+    text = (out / "diagnosability.md").read_text()
+    assert "paper indicator set (10 indicators)" in text and "extended indicator set (18 indicators)" in text
+    for name, n_ind in (("paper", 10), ("extended", 18)):
+        laws = pd.read_csv(out / f"diagnosability_{name}_laws.csv")
+        assert len(laws) == 7 * n_ind and {"r2_linear", "r2_power", "z_power"} <= set(laws.columns)
+        modes = json.loads((out / f"diagnosability_{name}.json").read_text())["modes"]
+        assert [m["mode"] for m in modes] == list(MODE_IDS)

@@ -43,7 +43,7 @@ def test_retired_version_of_a_copy_with_a_higher_version(tmp_path, monkeypatch):
     """Lower versions than the shipped file's are retired, whatever the number."""
     import fuelhm_bench.scenarios.registry as registry
 
-    text = re.sub(r"^version: 1\b", "version: 3", registry.shipped_scenario_files()["low_data"].read_text(),
+    text = re.sub(r"^version: \d+\b", "version: 3", registry.shipped_scenario_files()["low_data"].read_text(),
                   flags=re.M)
     (tmp_path / "low_data.yaml").write_text(text)
     monkeypatch.setattr(registry, "_shipped_directory", lambda: tmp_path)

@@ -13,7 +13,7 @@ def register(sub) -> None:
     p = sub.add_parser("evaluate", help="evaluate detection/diagnosis methods on a scenario",
                        description="Get the scenario's published knowledge (ITL, signatures) and healthy training "
                                    "flights (simulated once, then cached), fit each method, then play every unit of "
-                                   "the scored fleet as an episode of FuelHM/ActuationLoop-v0 (maintenance off: "
+                                   "the scored fleet as an episode of FuelHM/ActuationLoop-v1 (maintenance off: "
                                    "faults evolve as scheduled), the method deciding flight by flight on the "
                                    "observation only, and write its KPI tables (the paper's Tables V and VI, FCR, "
                                    "confusion, delays, bands, confidence intervals, robustness under drift, cost "

@@ -13,7 +13,9 @@ def register(sub) -> None:
                        description="Simulate the design of experiments (every unit flies the same flight healthy "
                                    "and with each degradation at increasing intensities), fit the 70 linear laws "
                                    "dI = A * intensity (paper eqs. 2-5), fit the healthy model on a healthy fleet "
-                                   "and write itl.csv, signatures.csv/.md (Table IV, eq. 9) and plots.")
+                                   "and write itl.csv, signatures.csv/.md (Table IV, eq. 9), plots and the diagnosability "
+                                   "report (largest |Z| per mode, R2 of the linear and monotone laws, cosine "
+                                   "similarity of the signatures; paper's ten and extended indicators).")
     p.add_argument("--scenario", default=None,
                    help="scenario name or YAML file: mission, sensor and dispersion of its training fleet")
     p.add_argument("--units", type=bounded(int, 1, 10_000), default=8, help="DOE units (default 8)")
@@ -46,7 +48,36 @@ def run(args: argparse.Namespace) -> int:
     with progress_bar(build.n_flights, "ITL design of experiments") as bar:
         result = build_knowledge(build, progress=bar.update)
     paths = write_knowledge(result, out)
+    paths += write_diagnosability(result, out)
     n_bad = int((result.itl.table["r2"] < 0.8).sum())
     print(f"{len(result.itl.table)} laws ({n_bad} with r2 < 0.8) from {build.n_flights} flights in "
           f"{time.perf_counter() - t0:.1f} s; wrote {', '.join(p.name for p in paths)} to {out}")
     return 0
+
+
+def write_diagnosability(result, out) -> list:
+    """Write the diagnosability reports of the paper's ten and of the extended set, and their summary.
+
+    ``diagnosability.md`` holds both tables; ``diagnosability_paper.*`` and
+    ``diagnosability_extended.*`` the full content (JSON, every law's R² in CSV).
+    """
+    from pathlib import Path
+
+    from fuelhm_bench.diagnosis.diagnosability import diagnosability_report
+    from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES, INDICATOR_NAMES
+
+    reports = [diagnosability_report(result.doe_table, result.healthy_table, features=features,
+                                     max_intensity=result.max_intensity, name=name)
+               for name, features in (("paper", INDICATOR_NAMES), ("extended", ALL_INDICATOR_NAMES))]
+    paths = []
+    for report in reports:
+        paths += report.write(out)
+    summary = Path(out) / "diagnosability.md"
+    summary.write_text("# Diagnosability of the degradation modes\n\n" +
+                       "\n\n".join(r.to_markdown() for r in reports) + "\n")
+    for r in reports:
+        weak = [m for m, v in zip(r.modes["mode"], r.modes["visible"]) if not v]
+        pairs = ", ".join(f"{a}/{b} {c:.2f}" for a, b, c in r.similar_pairs()) or "none"
+        print(f"diagnosability ({r.name}, {len(r.features)} indicators): modes below |Z| {r.z_target:g}: "
+              f"{', '.join(weak) or 'none'}; signature pairs with cosine > {r.cosine_limit:g}: {pairs}")
+    return [summary, *paths]

@@ -16,7 +16,7 @@ from fuelhm_bench.errors import (  # noqa: F401 (NotFittedError re-exported)
     UnknownNameError,
     parameter_error,
 )
-from fuelhm_bench.taxonomy import INDICATOR_NAMES
+from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES, INDICATOR_NAMES
 
 #: Label of healthy flights in the ``mode`` column of a DOE table.
 HEALTHY: str = "healthy"
@@ -44,7 +44,9 @@ def param_error(name: str, owner: str, allowed: str, given: object) -> Parameter
 
 
 def check_features(features: Iterable[str] | None, owner: str, name: str = "features") -> tuple[str, ...]:
-    """Validate an indicator selection; ``None`` means all of ``INDICATOR_NAMES``.
+    """Validate an indicator selection; ``None`` means the paper's ten (``INDICATOR_NAMES``).
+
+    Names may also be extended indicators (``EXTENDED_INDICATOR_NAMES``).
 
     Parameters
     ----------
@@ -74,11 +76,11 @@ def check_features(features: Iterable[str] | None, owner: str, name: str = "feat
     names = tuple(features)
     if not names or not all(isinstance(f, str) for f in names) or len(set(names)) != len(names):
         raise param_error(name, owner, "a non-empty sequence of distinct indicator names or None", features)
-    unknown = [f for f in names if f not in INDICATOR_NAMES]
+    unknown = [f for f in names if f not in ALL_INDICATOR_NAMES]
     if unknown:
         raise UnknownNameError(
             f"Unknown indicator name(s) {unknown} in the '{name}' parameter of {owner}; "
-            f"allowed: {list(INDICATOR_NAMES)}."
+            f"allowed: {list(ALL_INDICATOR_NAMES)} (the paper's ten, then the extended indicators)."
         )
     return names
 

@@ -29,7 +29,7 @@ from fuelhm_bench.diagnosis._validation import (
     require_columns,
 )
 from fuelhm_bench.errors import DataFormatError, UnknownNameError
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, INDICATOR_UNITS, MODE_IDS
+from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES, INDICATOR_NAMES, INDICATOR_UNITS, MODE_IDS
 
 #: Columns of :attr:`ITL.table`, in order.
 ITL_COLUMNS: tuple[str, ...] = ("mode", "indicator", "A", "r2", "residual_std", "n")
@@ -224,7 +224,7 @@ class ITL:
         extra = [c for c in table.columns if c not in ITL_COLUMNS]
         if extra:
             raise DataFormatError(f"The ITL table has unexpected column(s) {extra}; allowed: {list(ITL_COLUMNS)}.")
-        for column, allowed in (("mode", MODE_IDS), ("indicator", INDICATOR_NAMES)):
+        for column, allowed in (("mode", MODE_IDS), ("indicator", ALL_INDICATOR_NAMES)):
             unknown = sorted({str(v) for v in table[column] if v not in allowed})
             if unknown:
                 raise DataFormatError(f"Column {column!r} of the ITL table has unknown value(s) {unknown}; allowed: {list(allowed)}.")
@@ -240,7 +240,7 @@ class ITL:
         if not np.all(np.isfinite(out["n"]) & (out["n"] >= 0) & (out["n"] % 1 == 0)):
             raise DataFormatError("Column 'n' of the ITL table must hold non-negative integers.")
         out["n"] = out["n"].astype(np.int64)
-        order = np.lexsort((out["indicator"].map(INDICATOR_NAMES.index), out["mode"].map(MODE_IDS.index)))
+        order = np.lexsort((out["indicator"].map(ALL_INDICATOR_NAMES.index), out["mode"].map(MODE_IDS.index)))
         object.__setattr__(self, "table", out.iloc[order].reset_index(drop=True))
 
     @property
@@ -251,7 +251,7 @@ class ITL:
     @property
     def indicators(self) -> tuple[str, ...]:
         present = set(self.table["indicator"])
-        return tuple(f for f in INDICATOR_NAMES if f in present)
+        return tuple(f for f in ALL_INDICATOR_NAMES if f in present)
 
     def matrix(self, value: str = "A") -> pd.DataFrame:
         """One column of the law table as a modes x indicators matrix.

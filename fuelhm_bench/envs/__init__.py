@@ -5,14 +5,24 @@ Gymnasium's registry; the environment module itself (physics, indicators) is
 only imported by ``gymnasium.make``::
 
     import gymnasium as gym
-    import fuelhm_bench.envs  # registers FuelHM/ActuationLoop-v0
+    import fuelhm_bench.envs  # registers FuelHM/ActuationLoop-v1
 
-    env = gym.make("FuelHM/ActuationLoop-v0", scenario="all_modes", fidelity="surrogate")
+    env = gym.make("FuelHM/ActuationLoop-v1", scenario="all_modes", fidelity="surrogate")
 
-``gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v0")`` imports the package
+``gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v1")`` imports the package
 itself. Versions follow Gymnasium's rule: any change that alters observations
 or rewards for the same arguments bumps ``-vN``; asking for a retired
-version names the current one.
+version names the current one (``FuelHM/ActuationLoop-v0`` -> "deprecated. Please use
+`FuelHM/ActuationLoop-v1` instead", Gymnasium's :class:`~gymnasium.error.DeprecatedEnv`).
+
+Version history
+---------------
+v1
+    Physics v2 (issue 11): operating excitation without per-frame N2 dither, degradation
+    laws as mechanisms, re-sized scenarios (every shipped scenario at version 2). Scores of
+    v0 are not comparable.
+v0
+    Initial version (retired).
 
 Public names
 ------------
@@ -38,7 +48,7 @@ __all__ = ["ENV_IDS", "ActuationLoopEnv", "KnowledgeSize", "SurrogateModel", "cl
 
 #: Registered environment ids -> entry points (``"module:Class"``, imported on ``make``).
 ENV_IDS: dict[str, str] = {
-    "FuelHM/ActuationLoop-v0": "fuelhm_bench.envs.actuation_loop:ActuationLoopEnv",
+    "FuelHM/ActuationLoop-v1": "fuelhm_bench.envs.actuation_loop:ActuationLoopEnv",
 }
 
 _LAZY = {

@@ -1,4 +1,4 @@
-"""``FuelHM/ActuationLoop-v0``: the health monitoring of one actuation loop, flight by flight."""
+"""``FuelHM/ActuationLoop-v1``: the health monitoring of one actuation loop, flight by flight."""
 
 from __future__ import annotations
 
@@ -92,7 +92,7 @@ class ActuationLoopEnv(gym.Env):
     of the common interface maps onto an action without loss. A Box cannot
     say "sums to 1": the environment only requires each entry in [0, 1]; the
     runner (:mod:`fuelhm_bench.runner`) records the guilt for the diagnosis
-    KPIs. Guilt does not enter the reward in v0. An action outside the space
+    KPIs. Guilt does not enter the reward (v0 and v1). An action outside the space
     raises :class:`~fuelhm_bench.errors.ParameterError` naming the space.
 
     ## Observation Space
@@ -190,7 +190,7 @@ class ActuationLoopEnv(gym.Env):
     ```python
     import gymnasium as gym
     import fuelhm_bench.envs
-    env = gym.make("FuelHM/ActuationLoop-v0", scenario="all_modes", fidelity="surrogate")
+    env = gym.make("FuelHM/ActuationLoop-v1", scenario="all_modes", fidelity="surrogate")
     ```
 
     | argument        | default        | meaning                                                                     |
@@ -213,7 +213,14 @@ class ActuationLoopEnv(gym.Env):
 
     ## Version History
 
-    * v0: initial version (surrogate with unit/flight variance split; guilt not rewarded).
+    * v1: physics v2 (issue 11): no per-frame N2 dither in the operating excitation, the seven
+      degradation laws act on the physical element that degrades, every shipped scenario at
+      version 2 (all_modes with >= 15 faulty units per mode). Observations and rewards differ
+      from v0 for the same arguments. The observation still holds the paper's ten indicators;
+      the extended indicators are columns of the indicator tables (training, DOE), not yet of
+      the observation.
+    * v0: initial version (surrogate with unit/flight variance split; guilt not rewarded). Retired:
+      ``gym.make("FuelHM/ActuationLoop-v0")`` raises ``DeprecatedEnv`` naming v1.
 
     Attributes
     ----------

@@ -363,7 +363,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
                       progress: Callable[[int], object] | None = None) -> pd.DataFrame:
     """Indicator table of the scenario's scored fleet, as flown without maintenance, cached.
 
-    These are the physics observations of ``FuelHM/ActuationLoop-v0`` replaying
+    These are the physics observations of ``FuelHM/ActuationLoop-v1`` replaying
     units ``0 .. units - 1`` with ``maintenance=False``
     (:meth:`ActuationLoopEnv.load_replays <fuelhm_bench.envs.ActuationLoopEnv.load_replays>`):
     simulated once, then shared by every method evaluated.

@@ -39,6 +39,7 @@ from fuelhm_bench.indicators.velocity import (
     window_slope,
 )
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
+from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES
 
 
 def velocity_points(time_s: object, current_ma: object, position_mm: object,
@@ -225,8 +226,11 @@ def extract_table(flights: Iterable[object], config: ExtractionConfig | None = N
     pandas.DataFrame
         Columns, in this order: ``flight_id``, ``unit_id`` (only when at least one flight has a
         non-None ``unit_id`` attribute), the ten indicators (float64, NaN when invalid),
-        ``<name>_valid`` (bool) for the ten, ``n_points`` (int64), ``quality_reason`` (str,
-        ``""`` when all ten are valid). Units: :data:`~fuelhm_bench.taxonomy.INDICATOR_UNITS`.
+        ``<name>_valid`` (bool) for the ten, the extended indicators
+        (:data:`~fuelhm_bench.taxonomy.EXTENDED_INDICATOR_NAMES`, float64) and their
+        ``<name>_valid`` (bool), ``n_points`` (int64), ``quality_reason`` (str, ``""`` when all
+        ten are valid). Units: :data:`~fuelhm_bench.taxonomy.INDICATOR_UNITS` and
+        :data:`~fuelhm_bench.taxonomy.EXTENDED_INDICATOR_UNITS`.
 
     Raises
     ------
@@ -268,7 +272,7 @@ def extract_table(flights: Iterable[object], config: ExtractionConfig | None = N
         rows.append({"flight_id": flight_id, "unit_id": unit_id, **result.to_row()})
     columns = table_columns(with_unit_id=has_unit)
     table = pd.DataFrame(rows, columns=columns)
-    for name in INDICATOR_NAMES:
+    for name in ALL_INDICATOR_NAMES:
         table[name] = table[name].astype(np.float64)
         table[f"{name}_valid"] = table[f"{name}_valid"].astype(bool)
     table["n_points"] = table["n_points"].astype(np.int64)

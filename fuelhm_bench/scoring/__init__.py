@@ -12,8 +12,11 @@ fit_healthy_model, HealthyScoreModel, threshold_table
     Thresholds ``mu + A sigma`` from healthy-training scores only (paper eq. 10).
 wilson_interval, bootstrap_ratio_interval, rates_with_intervals
     Confidence intervals.
+error_rate_changes, drift_sweep_table, degradation_summary
+    Robustness: FPR and FNR changes under drift, over a sweep, and the drift at which a method
+    degrades by a stated amount (the sweep itself: :mod:`fuelhm_bench.drift_sweep`).
 robustness, robustness_table
-    Nominal vs drifted runs.
+    Nominal vs drifted runs: every headline KPI, and one KPI's ratio.
 perfect_decisions, null_decisions
     Reference decisions (oracle and never-alarm).
 maintenance_cost, total_cost
@@ -36,7 +39,13 @@ from fuelhm_bench.scoring.figures import plot_score_distributions, save_figure
 from fuelhm_bench.scoring.intervals import (bootstrap_ratio_interval, rates_with_intervals,
                                             wilson_interval)
 from fuelhm_bench.scoring.reference import null_decisions, perfect_decisions
-from fuelhm_bench.scoring.robustness import robustness, robustness_table
+from fuelhm_bench.scoring.robustness import (
+    degradation_summary,
+    drift_sweep_table,
+    error_rate_changes,
+    robustness,
+    robustness_table,
+)
 from fuelhm_bench.scoring.run import (HEALTHY, LABEL_COLUMNS, MULTIPLE, NO_ALARM, TIE, Run,
                                       flight_table)
 from fuelhm_bench.scoring.scorecard import HEADLINE_KPIS, Scorecard, headline_kpis, score_run
@@ -50,6 +59,7 @@ __all__ = [
     "detection_delays", "detection_table", "diagnosis_table", "fit_healthy_model",
     "flight_table", "headline_kpis", "maintenance_cost", "null_decisions", "perfect_decisions",
     "plot_score_distributions", "rates_with_intervals", "robustness", "robustness_table",
+    "degradation_summary", "drift_sweep_table", "error_rate_changes",
     "save_figure", "score_run", "summary_components", "summary_score", "threshold_table",
     "to_latex", "to_markdown", "total_cost", "wilson_interval", "write_tables",
 ]

@@ -1,0 +1,77 @@
+"""Robustness measured: the drift sweep (one parameter at a time, several magnitudes) on a tiny setting."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fuelhm_bench.drift_sweep import DriftSweep, run_drift_sweep
+from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.methods import RandomMethod
+from fuelhm_bench.scoring import degradation_summary, drift_sweep_table
+
+
+def test_sweep_declaration_is_validated():
+    assert DriftSweep().magnitudes == (0.05, 0.1, 0.2)
+    with pytest.raises(ParameterError, match="at least three distinct"):
+        DriftSweep(magnitudes=(0.1, 0.2))
+    with pytest.raises(ParameterError, match="> -1 for relative"):
+        DriftSweep(magnitudes=(-1.5, 0.1, 0.2))
+    with pytest.raises(ParameterError, match="'change' parameter of DriftSweep"):
+        DriftSweep(change="scaled")
+    with pytest.raises(ParameterError, match="'parameters' parameter"):
+        DriftSweep(parameters="fluid.supply_rise_at_100pct_pa")
+
+
+def test_summary_finds_the_first_degrading_drift_per_parameter():
+    sweep = pd.DataFrame({"parameter": ["a"] * 3 + ["b"] * 3, "magnitude": [-0.2, 0.05, -0.1, 0.1, 0.2, 0.3],
+                          "delta_fpr": [0.2, 0.0, 0.01, 0.0, 0.01, 0.02],
+                          "delta_fnr": [0.0, 0.0, 0.07, 0.0, 0.0, 0.04]})
+    s = degradation_summary(sweep, tolerance=0.05).set_index("parameter")
+    assert s.loc["a", "degrades_at"] == -0.1 and s.loc["a", "by"] == "fnr"
+    assert np.isnan(s.loc["b", "degrades_at"]) and "neither FPR nor FNR" in s.loc["b", "summary"]
+    assert s.loc["a", "max_delta_fpr"] == 0.2
+    with pytest.raises(ParameterError, match="tolerance"):
+        degradation_summary(sweep, tolerance=5)
+
+
+def test_sweep_table_rejects_bad_keys():
+    with pytest.raises(ParameterError, match="non-empty mapping"):
+        drift_sweep_table(None, {})
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    from conftest import _tiny_scenario
+
+    return _tiny_scenario(tmp_path_factory.mktemp("sweep"), "tinysweep", base="paper_2012")
+
+
+def test_a_method_blind_to_the_data_shows_no_change(tiny):
+    sweep = DriftSweep(parameters=("fluid.supply_rise_at_100pct_pa",), magnitudes=(-0.1, -0.3, -0.5))
+    result = run_drift_sweep(RandomMethod(alarm_probability=0.3), tiny, sweep, doe_units=1)
+    t = result.table
+    assert t["magnitude"].tolist() == [-0.1, -0.3, -0.5] and len(result.runs) == 3
+    # Same units, same flights, same seeds: the random method decides the same; only drift could differ.
+    assert (t["delta_fpr"] == 0).all() and (t["delta_fnr"] == 0).all()
+    assert np.isnan(result.summary["degrades_at"].iloc[0])
+    assert "| fluid.supply_rise_at_100pct_pa | -0.5 |" in result.to_markdown()
+
+
+@pytest.mark.slow
+def test_sweep_measures_fpr_and_fnr_changes_of_a_real_method(tiny):
+    from baselines.paper_mahalanobis import PaperMahalanobis
+
+    sweep = DriftSweep(parameters=("fluid.supply_rise_at_100pct_pa",), magnitudes=(-0.05, -0.25, -0.5),
+                       tolerance=0.05)
+    result = run_drift_sweep(PaperMahalanobis(a=2.0), tiny, sweep, doe_units=1)
+    t = result.table.set_index("magnitude")
+    for col in ("fpr", "fnr", "balanced_accuracy"):
+        np.testing.assert_allclose(t[f"delta_{col}"], t[f"{col}_drifted"] - t[f"{col}_nominal"])
+    # Halving the supply pressure rise slows the rod everywhere: healthy flights look faulty.
+    assert t.loc[-0.5, "delta_fpr"] > 0.05
+    s = result.summary.iloc[0]
+    assert s["degrades_at"] in (-0.05, -0.25, -0.5) and "fpr" in s["by"]
+    with pytest.raises(ParameterError, match="cannot drift"):
+        run_drift_sweep(PaperMahalanobis(), tiny, DriftSweep(parameters=("fluid.nonexistent_pa",)), doe_units=1)
