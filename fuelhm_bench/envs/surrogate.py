@@ -98,9 +98,10 @@ def _psd(matrix: np.ndarray) -> np.ndarray:
 
 
 def _factor(matrix: np.ndarray) -> np.ndarray:
-    """``L`` with ``L L^T = matrix`` (symmetric PSD)."""
+    """``L`` with ``L L^T = matrix`` (symmetric PSD); eigenvalues below rounding (1e-12 of the largest) are 0."""
     w, v = np.linalg.eigh(0.5 * (matrix + matrix.T))
-    return v * np.sqrt(np.clip(w, 0.0, None))
+    w = np.where(w > 1e-12 * max(float(w.max(initial=0.0)), 0.0), w, 0.0)
+    return v * np.sqrt(w)
 
 
 def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray):
@@ -167,8 +168,9 @@ def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...]
                 resp[a, b, c + 1] = np.where(valid[r] & valid[h], x[r] - x[h], np.nan)
                 invalid[a, b, c + 1] = valid[h] & ~valid[r]
     # A response that is unknown (invalid flight, missing case) takes the mean of the other DOE units; else 0.
-    with np.errstate(invalid="ignore"):
-        fill = np.nanmean(resp, axis=0) if k else np.zeros((m, q + 1, p))
+    known = np.isfinite(resp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fill = np.where(known, resp, 0.0).sum(axis=0) / known.sum(axis=0)
     fill = np.where(np.isfinite(fill), fill, 0.0)
     resp = np.where(np.isfinite(resp), resp, fill[None])
     return knots, resp, invalid
