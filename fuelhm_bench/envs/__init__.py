@@ -35,7 +35,7 @@ from gymnasium.envs.registration import register, registry
 
 __all__ = ["ENV_IDS", "ActuationLoopEnv", "KnowledgeSize", "SurrogateModel", "clear_memory_cache",
            "default_cache_dir", "published_knowledge", "register_envs", "scored_indicators",
-           "fit_surrogate", "surrogate_doe", "surrogate_knowledge", "training_indicators"]
+           "fit_surrogate", "surrogate_doe", "surrogate_healthy", "surrogate_knowledge", "training_indicators"]
 
 #: Registered environment ids -> entry points (``"module:Class"``, imported on ``make``).
 ENV_IDS: dict[str, str] = {
@@ -50,6 +50,7 @@ _LAZY = {
     "clear_memory_cache": "fuelhm_bench.envs.cache",
     "surrogate_knowledge": "fuelhm_bench.envs.cache",
     "surrogate_doe": "fuelhm_bench.envs.cache",
+    "surrogate_healthy": "fuelhm_bench.envs.cache",
     "fit_surrogate": "fuelhm_bench.envs.surrogate",
     "training_indicators": "fuelhm_bench.envs.cache",
     "scored_indicators": "fuelhm_bench.envs.cache",

@@ -529,7 +529,7 @@ class ActuationLoopEnv(gym.Env):
         g = guilt if type(guilt) is np.ndarray else np.asarray(guilt)
         if g.shape != (_N_MODES,) or g.dtype.kind not in "biuf":
             raise self._action_error(f"guilt of shape {g.shape} and dtype {g.dtype}")
-        if not (g.min() >= 0.0 and g.max() <= 1.0):
+        if not all(0.0 <= v <= 1.0 for v in g.tolist()):  # False for NaN; faster than two reductions on 7 numbers
             raise self._action_error(f"guilt={g.tolist()} (entries outside [0, 1] or NaN)")
         return value == 1
 

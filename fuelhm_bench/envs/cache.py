@@ -51,7 +51,7 @@ from fuelhm_bench.errors import ParameterError
 
 __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
            "knowledge_build", "published_knowledge", "resolve_scenario", "scored_indicators",
-           "surrogate_doe", "surrogate_knowledge", "training_indicators"]
+           "surrogate_doe", "surrogate_healthy", "surrogate_knowledge", "training_indicators"]
 
 #: Environment variable overriding the default cache directory.
 CACHE_ENV_VAR: str = "FUELHM_BENCH_CACHE"
@@ -83,8 +83,8 @@ class KnowledgeSize:
         Flights per published healthy unit, >= 1 (units x flights >= 11 for a
         10-indicator Gaussian).
     surrogate_units : int, default=20
-        Units of the healthy fleet the surrogate's Gaussian model is learnt
-        on (the scenario's training fleet, continued), >= 1.
+        Units of the healthy fleet the surrogate's healthy law is learnt on
+        (new units of the scored fleet's model, :func:`surrogate_healthy`), >= 1.
     surrogate_flights : int, default=10
         Flights per surrogate healthy unit, >= 1.
     surrogate_doe_units : int, default=6
@@ -454,18 +454,54 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     return table.copy()
 
 
+def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
+                      drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
+                      progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+    """Healthy flights of new units of the scored fleet's model (what the surrogate's healthy law is learnt on), cached.
+
+    ``size.surrogate_units x size.surrogate_flights`` healthy flights of units
+    manufactured like the scored fleet's (truth model with hidden effects, the
+    scored fleet's drift when ``drifted``, its mission, sensor and dispersion)
+    but seeded apart from both the training fleet and the scored fleet: the
+    surrogate must not be learnt on the very flights methods are fitted on
+    (a model always looks better on the flights it has seen, so a surrogate
+    made of them would flatter every method).
+
+    Returns
+    -------
+    pandas.DataFrame
+        The table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
+    """
+    from fuelhm_bench.datasets import fleet_indicators
+
+    sc = resolve_scenario(scenario)
+    _check_minutes(flight_minutes, "surrogate_healthy")
+    size = KnowledgeSize() if size is None else size
+    config = _with_minutes(sc.test_fleet_config(), flight_minutes)
+    drifted = bool(drifted) and bool(sc.drift)
+    config = dataclasses.replace(config, n_units=size.surrogate_units, n_flights=size.surrogate_flights,
+                                 schedules=(), simultaneous=True, seed=config.seed + 2,
+                                 nominal=sc.drifted_model() if drifted else sc.truth_model())
+    params = {"units": size.surrogate_units, "flights": size.surrogate_flights, "drifted": drifted}
+    key = cache_key("surrogate-healthy", sc, flight_minutes=flight_minutes, **params)
+
+    def make() -> dict[str, pd.DataFrame]:
+        return {"table": fleet_indicators(config, progress=progress)[0]}
+
+    table = _cached(key, _entry(cache_dir, "surrogate-healthy", sc, key), ("table",), make, lambda t: t["table"],
+                    {"scenario": sc.id, "kind": "surrogate-healthy", "flight_minutes": flight_minutes, **params})
+    return table.copy()
+
+
 def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                         drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
                         progress: Callable[[int], object] | None = None):
-    """What the surrogate fidelity is learnt from: physics flights of the scored fleet's model.
+    """What the surrogate fidelity is learnt from: physics flights of new units of the scored fleet's model.
 
-    ``healthy_table``: ``size.surrogate_units x size.surrogate_flights`` healthy
-    flights of the scenario's training fleet (truth model: hidden effects
-    included), with the scored fleet's drift when ``drifted``: the healthy
-    state of the scored units, independent of how little training data a
-    scenario gives methods. ``doe_table``: :func:`surrogate_doe`. The ITL and
-    signatures are the published ones (:func:`published_knowledge`); the
-    healthy model is the published recipe fitted on ``healthy_table``.
+    ``healthy_table``: :func:`surrogate_healthy` (units independent of the
+    training fleet methods are fitted on); ``doe_table``: :func:`surrogate_doe`.
+    The ITL and signatures are the published ones (:func:`published_knowledge`);
+    the healthy model is the published recipe fitted on ``healthy_table``.
     :meth:`SurrogateModel.from_knowledge <fuelhm_bench.envs.surrogate.SurrogateModel.from_knowledge>`
     learns the surrogate from the two tables.
 
@@ -477,13 +513,10 @@ def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     from fuelhm_bench.knowledge import KnowledgeResult
 
     size = KnowledgeSize() if size is None else size
-    published = published_knowledge(scenario, flight_minutes=flight_minutes, size=size, cache_dir=cache_dir,
-                                    progress=progress)
-    table = training_indicators(scenario, flight_minutes=flight_minutes, units=size.surrogate_units,
-                                flights=size.surrogate_flights, drifted=drifted, cache_dir=cache_dir,
-                                progress=progress)
-    doe = surrogate_doe(scenario, flight_minutes=flight_minutes, size=size, drifted=drifted, cache_dir=cache_dir,
-                        progress=progress)
+    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
+    published = published_knowledge(scenario, size=size, **common)
+    table = surrogate_healthy(scenario, size=size, drifted=drifted, **common)
+    doe = surrogate_doe(scenario, size=size, drifted=drifted, **common)
     return KnowledgeResult(published.itl, HealthyModel().fit(table), published.signatures,
                            dict(published.max_intensity), doe, table)
 
