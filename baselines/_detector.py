@@ -71,7 +71,7 @@ class HealthyScoreDetector(BaseMethod):
         raise NotImplementedError
 
     def _fit_all(self, x: np.ndarray, seed: int) -> tuple[HealthyModel, Any]:
-        model = HealthyModel().fit(x)
+        model = HealthyModel(min_flights=2).fit(x)  # only standardises: means and standard deviations
         return model, self._fit_scorer(standardised(model, x), seed)
 
     def _fit(self, healthy_indicators: pd.DataFrame, *, knowledge: Knowledge | None,

@@ -64,7 +64,8 @@ class FidelityReport:
     methods : pandas.DataFrame
         One row per method: ``method``, ``status_physics``, ``status_surrogate``,
         ``summary_physics``, ``summary_surrogate``, ``summary_diff`` (surrogate
-        minus physics, points), ``rank_physics``, ``rank_surrogate`` (1 = best).
+        minus physics, points), ``message`` (what went wrong, if a run failed),
+        ``rank_physics``, ``rank_surrogate`` (1 = best).
     modes : pandas.DataFrame
         One row per (method, mode): ``detection_physics``, ``detection_surrogate``,
         ``detection_diff``, ``fcr_physics``, ``fcr_surrogate``, ``fcr_diff``
@@ -203,6 +204,8 @@ def compare_outcomes(scenario: str, outcomes: dict[str, dict], *, targets: dict 
             cards[fid] = out.score() if out is not None and out.ok else None
             row[f"summary_{fid}"] = float(cards[fid].summary_score) if cards[fid] is not None else np.nan
         row["summary_diff"] = row["summary_surrogate"] - row["summary_physics"]
+        messages = [getattr(outcomes[f].get(name), "message", "") or "" for f in FIDELITIES]
+        row["message"] = next((m.strip().splitlines()[-1] for m in messages if m.strip()), "")
         rows.append(row)
         if all(c is not None for c in cards.values()):
             pm = {fid: _per_mode(c) for fid, c in cards.items()}
