@@ -2,7 +2,8 @@
 
 Synthetic physics-like tables with known structure (an exact linear relation, a tiny flight-to-flight
 direction, a unit share, invalid indicators, curved per-unit responses, an extended indicator) go in; the
-tests check that the fitted surrogate's draws carry the same structure. Pure numpy: no simulation.
+tests check that the fitted surrogate's draws carry the same structure. Pure numpy: no simulation, except
+the slow test against physics flights at the end.
 """
 
 from __future__ import annotations
@@ -178,3 +179,35 @@ def test_model_validates_its_arrays(model):
         SurrogateModel(names=model.names, modes=model.modes, mean=np.zeros(3), unit_factor=model.unit_factor,
                        residuals=model.residuals, residual_valid=model.residual_valid, knots=model.knots,
                        responses=model.responses, response_invalid=model.response_invalid)
+
+
+@pytest.mark.slow  # about 230 two-minute physics flights
+def test_surrogate_healthy_flights_sit_where_physics_flights_do(tmp_path):
+    """Under the covariance of physics healthy flights, surrogate healthy flights are as far from the mean
+    as fresh physics flights (the old Gaussian surrogate's median distance was 3.7 times the physics')."""
+    from fuelhm_bench.envs.cache import surrogate_knowledge, training_indicators
+    from fuelhm_bench.envs import KnowledgeSize
+    from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+    size = KnowledgeSize(doe_units=1, doe_intensities=(1.0,), healthy_units=2, healthy_flights=6,
+                         surrogate_units=16, surrogate_flights=6, surrogate_doe_units=1,
+                         surrogate_doe_intensities=(1.0,))
+    knowledge = surrogate_knowledge("paper_2012", flight_minutes=2.0, size=size, cache_dir=tmp_path)
+    model = SurrogateModel.from_knowledge(knowledge)
+    physics = training_indicators("paper_2012", flight_minutes=2.0, units=16, flights=6, cache_dir=tmp_path)
+    x = physics[list(INDICATOR_NAMES)].to_numpy(dtype=float)
+    x = x[np.isfinite(x).all(axis=1)]
+    mean, cov = x.mean(axis=0), np.cov(x, rowvar=False)
+    inv = np.linalg.pinv(cov, rcond=1e-10)
+    rng = np.random.default_rng(0)
+    cols = [model.names.index(n) for n in INDICATOR_NAMES]
+    draws = [model.draw_unit(rng, np.zeros((6, 7))) for _ in range(200)]
+    s = np.concatenate([v[k.all(axis=1)][:, cols] for v, k in draws])
+
+    def median_distance(rows):
+        d = rows - mean
+        return float(np.median(np.sqrt(np.einsum("ij,jk,ik->i", d, inv, d))))
+
+    ratio = median_distance(s) / median_distance(x)
+    # physics flights are in-sample for their own covariance (biased low), so the ratio sits a little above 1
+    assert 0.8 <= ratio <= 1.6, ratio
