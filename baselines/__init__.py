@@ -21,6 +21,10 @@ ENTRY_POINTS: dict[str, str] = {
     "paper-mahalanobis": "baselines.paper_mahalanobis:PaperMahalanobis",
     "isolation-forest": "baselines.isolation_forest:IsolationForestMethod",
     "itl-classifier": "baselines.itl_classifier:ITLClassifierMethod",
+    "full-gaussian": "baselines.gaussian_full:FullGaussianMethod",
+    "gaussian-mixture": "baselines.gaussian_mixture:GaussianMixtureMethod",
+    "one-class-svm": "baselines.one_class_svm:OneClassSVMMethod",
+    "nearest-neighbour": "baselines.nearest_neighbour:NearestNeighbourMethod",
 }
 
 

@@ -7,7 +7,8 @@ Each round plays whole episodes of the ``all_modes`` scenario (30 flights per un
 included, with a fixed no-alarm action (an agent's own cost is not the environment's). Reported in
 ``extra_info`` and on stdout:
 
-* ``surrogate_flights_per_s`` (target >= 20,000): drawn units, maintenance on;
+* ``surrogate_flights_per_s`` (target >= 50,000): drawn units, maintenance on, the surrogate learnt at
+  the default ``KnowledgeSize`` (its reset cost grows with the residual pool and the DOE);
 * ``physics_flights_per_s``: simulation + on-board extraction of each flight, at the scenario's
   20-minute flights and at the shortest (2-minute) flights.
 
@@ -21,7 +22,6 @@ import numpy as np
 import pytest
 
 import fuelhm_bench.envs  # noqa: F401 - registers the environment
-from fuelhm_bench.envs import KnowledgeSize
 
 ACTION = {"alarm": 0, "guilt": np.zeros(7, dtype=np.float32)}
 
@@ -38,16 +38,15 @@ def _episodes(env, n_episodes: int, seed: int = 0) -> int:
 
 
 @pytest.mark.benchmark(group="envs")
-def test_surrogate_throughput(benchmark, tmp_path):
-    env = gym.make("FuelHM/ActuationLoop-v1", scenario="all_modes", fidelity="surrogate",
-                   knowledge_size=KnowledgeSize.small(), cache_dir=tmp_path)
+def test_surrogate_throughput(benchmark):
+    env = gym.make("FuelHM/ActuationLoop-v1", scenario="all_modes", fidelity="surrogate")
     _episodes(env, 5)
     n_episodes = 200
     flights = benchmark.pedantic(_episodes, args=(env, n_episodes), rounds=5, iterations=1)
     rate = flights / benchmark.stats.stats.min
     benchmark.extra_info["surrogate_flights_per_s"] = rate
     print(f"\nsurrogate: {rate:,.0f} flights/s ({1e6 / rate:.1f} us per flight, resets included)")
-    assert rate >= 20_000, f"surrogate throughput {rate:,.0f} flights/s is below the 20,000 target"
+    assert rate >= 50_000, f"surrogate throughput {rate:,.0f} flights/s is below the 50,000 target"
 
 
 @pytest.mark.benchmark(group="envs")

@@ -13,7 +13,6 @@ import pickle
 import subprocess
 import sys
 import warnings
-from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -23,7 +22,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 
 import fuelhm_bench.envs  # noqa: F401 - registers the environment ids
-from fuelhm_bench.envs import KnowledgeSize, SurrogateModel
+from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.envs.actuation_loop import INDICATOR_BOUNDS, ActuationLoopEnv
 from fuelhm_bench.envs.cache import (cache_key, clear_memory_cache, default_cache_dir, published_knowledge,
                                      surrogate_knowledge, training_indicators)
@@ -357,30 +356,6 @@ def test_surrogate_matches_physics_distributions(cache_dir):
     assert np.all((ratio >= 0.4) & (ratio <= 2.5)), pd.Series(ratio, index=INDICATOR_NAMES).round(2)
     shift = np.nanmean(results["null_bias_drift"][0], axis=0) - np.nanmean(results["healthy"][0], axis=0)
     assert shift[INDICATOR_NAMES.index("I0")] > 5 * sd_healthy[INDICATOR_NAMES.index("I0")]  # the test has teeth
-
-
-def test_surrogate_recovers_the_unit_share_of_the_variance():
-    rng = np.random.default_rng(0)
-    n_units, n_flights, share = 200, 10, np.linspace(0.1, 0.9, 10)
-    sd = np.linspace(0.5, 5.0, 10)
-    unit = rng.standard_normal((n_units, 10)) * sd * np.sqrt(share)
-    flight = rng.standard_normal((n_units, n_flights, 10)) * sd * np.sqrt(1 - share)
-    values = (unit[:, None, :] + flight).reshape(-1, 10)
-    table = pd.DataFrame(values + 3.0, columns=list(INDICATOR_NAMES))
-    table["unit_id"] = np.repeat(np.arange(n_units), n_flights)
-    from fuelhm_bench.diagnosis.healthy import HealthyModel
-
-    shift = pd.DataFrame(np.arange(70.0).reshape(7, 10), index=list(MODE_IDS), columns=list(INDICATOR_NAMES))
-    fake = SimpleNamespace(healthy_model=HealthyModel().fit(table), healthy_table=table,
-                           itl=SimpleNamespace(matrix=lambda value="A": shift))
-    model = SurrogateModel.from_knowledge(fake)
-    np.testing.assert_allclose(model.unit_share, share, atol=0.12)
-    np.testing.assert_allclose(model.describe()["std"], fake.healthy_model.std_, rtol=1e-9)  # total = cov_ exactly
-    draws = np.stack([model.healthy(np.random.default_rng(s), 20) for s in range(200)])
-    within = draws.var(axis=1, ddof=1).mean(axis=0) / draws.reshape(-1, 10).var(axis=0)
-    np.testing.assert_allclose(within, 1 - model.unit_share, atol=0.08)
-    degraded = model.indicators(np.zeros((1, 10)), np.eye(7)[[1]])
-    assert degraded[0, INDICATOR_NAMES.index("Inb")] == 0.5 * (degraded[0, 0] + degraded[0, 2])
 
 
 # --------------------------------------------------------------------------- cache

@@ -34,8 +34,9 @@ KnowledgeSize, published_knowledge, training_indicators, scored_indicators, surr
 default_cache_dir, clear_memory_cache
     Cached simulated products: published knowledge, training flights, scored flights, the
     surrogate's inputs (:mod:`fuelhm_bench.envs.cache`).
-SurrogateModel
-    The surrogate fidelity (:mod:`fuelhm_bench.envs.surrogate`).
+SurrogateModel, fit_surrogate, surrogate_doe
+    The surrogate fidelity, learnt from physics indicator tables (:mod:`fuelhm_bench.envs.surrogate`),
+    and the design of experiments it is learnt on.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from gymnasium.envs.registration import register, registry
 
 __all__ = ["ENV_IDS", "ActuationLoopEnv", "KnowledgeSize", "SurrogateModel", "clear_memory_cache",
            "default_cache_dir", "published_knowledge", "register_envs", "scored_indicators",
-           "surrogate_knowledge", "training_indicators"]
+           "fit_surrogate", "surrogate_doe", "surrogate_healthy", "surrogate_knowledge", "training_indicators"]
 
 #: Registered environment ids -> entry points (``"module:Class"``, imported on ``make``).
 ENV_IDS: dict[str, str] = {
@@ -58,6 +59,9 @@ _LAZY = {
     "default_cache_dir": "fuelhm_bench.envs.cache",
     "clear_memory_cache": "fuelhm_bench.envs.cache",
     "surrogate_knowledge": "fuelhm_bench.envs.cache",
+    "surrogate_doe": "fuelhm_bench.envs.cache",
+    "surrogate_healthy": "fuelhm_bench.envs.cache",
+    "fit_surrogate": "fuelhm_bench.envs.surrogate",
     "training_indicators": "fuelhm_bench.envs.cache",
     "scored_indicators": "fuelhm_bench.envs.cache",
     "SurrogateModel": "fuelhm_bench.envs.surrogate",

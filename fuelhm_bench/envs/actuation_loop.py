@@ -69,9 +69,10 @@ class ActuationLoopEnv(gym.Env):
     simulated (numba integrator, the scenario's truth model with its hidden
     effects and drift) and the indicators are extracted from the recorded
     current and position, exactly as :func:`fuelhm_bench.datasets.fleet_indicators`
-    does; with ``fidelity="surrogate"`` they are drawn from a healthy Gaussian
-    model of the scored fleet (split into a per-unit and a per-flight part) and
-    shifted by the published indicator transformation laws (paper eq. 4,
+    does; with ``fidelity="surrogate"`` they are drawn from a law learnt on
+    physics flights of the scored fleet's model (a Gaussian unit effect,
+    resampled flight-to-flight residuals with their invalid indicators, and the
+    per-unit, per-intensity responses of a design of experiments:
     :class:`~fuelhm_bench.envs.surrogate.SurrogateModel`; inputs from
     :func:`~fuelhm_bench.envs.cache.surrogate_knowledge`, cached), thousands of
     times faster.
@@ -218,7 +219,8 @@ class ActuationLoopEnv(gym.Env):
       version 2 (all_modes with >= 15 faulty units per mode). Observations and rewards differ
       from v0 for the same arguments. The observation still holds the paper's ten indicators;
       the extended indicators are columns of the indicator tables (training, DOE), not yet of
-      the observation.
+      the observation. The surrogate fidelity is re-learnt from physics flights (resampled
+      residuals, invalid indicators, DOE responses per unit and intensity; issue 12).
     * v0: initial version (surrogate with unit/flight variance split; guilt not rewarded). Retired:
       ``gym.make("FuelHM/ActuationLoop-v0")`` raises ``DeprecatedEnv`` naming v1.
 
@@ -301,6 +303,12 @@ class ActuationLoopEnv(gym.Env):
                 knowledge = surrogate_knowledge(sc, flight_minutes=self.flight_minutes, size=size,
                                                 drifted=self.drifted, cache_dir=cache_dir)
             self.surrogate = SurrogateModel.from_knowledge(knowledge)
+            missing = [n for n in INDICATOR_NAMES if n not in self.surrogate.names]
+            if missing or tuple(self.surrogate.modes) != tuple(MODE_IDS):
+                raise DataFormatError(f"The surrogate of {owner} must draw the indicators {list(INDICATOR_NAMES)} "
+                                      f"for the modes {list(MODE_IDS)}. Got indicators {list(self.surrogate.names)}"
+                                      f" and modes {list(self.surrogate.modes)} instead.")
+            self._columns = np.array([self.surrogate.names.index(n) for n in INDICATOR_NAMES])
 
         obs = {"indicators": spaces.Box(_LOW, _HIGH, (len(INDICATOR_NAMES),), np.float32),
                "valid": spaces.MultiBinary(len(INDICATOR_NAMES))}
@@ -314,7 +322,6 @@ class ActuationLoopEnv(gym.Env):
         self.action_space = spaces.Dict({"alarm": spaces.Discrete(2),
                                          "guilt": spaces.Box(0.0, 1.0, (_N_MODES,), np.float32)})
         self._t = -1  # no episode yet
-        self._valid_ones = np.ones(len(INDICATOR_NAMES), dtype=np.int8)
         self._replays: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def load_replays(self, table) -> None:
@@ -422,8 +429,8 @@ class ActuationLoopEnv(gym.Env):
         self._active_log, self._fail_log, self._repair_log, self._cost_log = [], [], [], []
         if self.fidelity == "surrogate":
             rng = rng_for(self._seed, _STREAM_SURROGATE, self._slot)
-            self._healthy = self.surrogate.healthy(rng, n)
-            self._table = np.clip(self.surrogate.indicators(self._healthy, intensity), _LOW, _HIGH).astype(np.float32)
+            self._parts = self.surrogate.draw_parts(rng, n)
+            self._fill_surrogate(0, intensity)
         elif self._model is None:
             from fuelhm_bench.physics.model import manufacture
 
@@ -440,7 +447,7 @@ class ActuationLoopEnv(gym.Env):
         """Fly flight ``t`` (physics) or read it (surrogate); log the unit's state during it."""
         self._active_log.append(self._active)
         if self.surrogate is not None:
-            return {"indicators": self._table[t].copy(), "valid": self._valid_ones.copy()}
+            return {"indicators": self._table[t].copy(), "valid": self._valid_table[t].copy()}
         replay = self._replays.get(self._unit_id) if self._unit_id >= 0 else None
         if replay is not None:
             self._last = {"indicators": replay[0][t], "valid": replay[1][t]}
@@ -479,6 +486,20 @@ class ActuationLoopEnv(gym.Env):
             obs["raw"] = np.clip(raw, low, high).astype(np.float32)
         return obs
 
+    def _fill_surrogate(self, start: int, intensity: np.ndarray) -> None:
+        """Surrogate observations of flights ``start ..`` for these intensities (the unit's draws are kept)."""
+        parts = self._parts
+        if start:
+            parts = {"healthy": parts["healthy"][start:], "valid": parts["valid"][start:],
+                     "doe_units": parts["doe_units"], "uniforms": parts["uniforms"][start:]}
+        values, valid = self.surrogate.degrade(parts, intensity)
+        values = np.clip(values[:, self._columns], _LOW, _HIGH).astype(np.float32)
+        valid = valid[:, self._columns].astype(np.int8)
+        if start:
+            self._table[start:], self._valid_table[start:] = values, valid
+        else:
+            self._table, self._valid_table = values, valid
+
     def _mask(self, bits: int) -> np.ndarray:
         return ((bits & _BITS) != 0).astype(np.float64)
 
@@ -514,7 +535,7 @@ class ActuationLoopEnv(gym.Env):
         g = guilt if type(guilt) is np.ndarray else np.asarray(guilt)
         if g.shape != (_N_MODES,) or g.dtype.kind not in "biuf":
             raise self._action_error(f"guilt of shape {g.shape} and dtype {g.dtype}")
-        if not (g.min() >= 0.0 and g.max() <= 1.0):
+        if not all(0.0 <= v <= 1.0 for v in g.tolist()):  # False for NaN; faster than two reductions on 7 numbers
             raise self._action_error(f"guilt={g.tolist()} (entries outside [0, 1] or NaN)")
         return value == 1
 
@@ -577,7 +598,7 @@ class ActuationLoopEnv(gym.Env):
         if t == self.n_flights:
             self._t = -1
             if self.surrogate is not None:
-                obs = {"indicators": self._table[t - 1].copy(), "valid": self._valid_ones.copy()}
+                obs = {"indicators": self._table[t - 1].copy(), "valid": self._valid_table[t - 1].copy()}
             else:
                 obs = {k: v.copy() for k, v in self._last.items()}
             info = {"flight_index": t - 1, "episode_truth": self._episode_truth()}
@@ -603,9 +624,7 @@ class ActuationLoopEnv(gym.Env):
         """Remove the repaired modes from flight ``t + 1`` on (surrogate: recompute the remaining table)."""
         self._active &= ~repaired
         if self.surrogate is not None and t + 1 < self.n_flights:
-            rest = self._intensity[t + 1:] * self._mask(self._active)
-            self._table[t + 1:] = np.clip(self.surrogate.indicators(self._healthy[t + 1:], rest),
-                                          _LOW, _HIGH).astype(np.float32)
+            self._fill_surrogate(t + 1, self._intensity[t + 1:] * self._mask(self._active))
 
     def _episode_truth(self) -> dict:
         n = self.n_flights

@@ -51,7 +51,7 @@ from fuelhm_bench.errors import ParameterError, parameter_error
 
 __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
            "knowledge_build", "published_knowledge", "resolve_scenario", "scored_indicators",
-           "surrogate_knowledge", "training_indicators"]
+           "surrogate_doe", "surrogate_healthy", "surrogate_knowledge", "training_indicators"]
 
 #: Environment variable overriding the default cache directory.
 CACHE_ENV_VAR: str = "FUELHM_BENCH_CACHE"
@@ -83,10 +83,15 @@ class KnowledgeSize:
         Flights per published healthy unit, >= 1 (units x flights >= 11 for a
         10-indicator Gaussian).
     surrogate_units : int, default=20
-        Units of the healthy fleet the surrogate's Gaussian model is learnt
-        on (the scenario's training fleet, continued), >= 1.
+        Units of the healthy fleet the surrogate's healthy law is learnt on
+        (new units of the scored fleet's model, :func:`surrogate_healthy`), >= 1.
     surrogate_flights : int, default=10
         Flights per surrogate healthy unit, >= 1.
+    surrogate_doe_units : int, default=6
+        Units of the design of experiments the surrogate's degraded responses
+        are learnt on (the scored fleet's model), >= 1.
+    surrogate_doe_intensities : tuple of float, default=(0.1, 0.25, 0.5, 0.75, 1.0)
+        Its intensities, each in (0, 1].
 
     Examples
     --------
@@ -100,28 +105,34 @@ class KnowledgeSize:
     healthy_flights: int = 5
     surrogate_units: int = 20
     surrogate_flights: int = 10
+    surrogate_doe_units: int = 6
+    surrogate_doe_intensities: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75, 1.0)
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ParameterError:
             return parameter_error(name, "KnowledgeSize", allowed, getattr(self, name))
 
-        for name in ("doe_units", "healthy_units", "healthy_flights", "surrogate_units", "surrogate_flights"):
+        for name in ("doe_units", "healthy_units", "healthy_flights", "surrogate_units", "surrogate_flights",
+                     "surrogate_doe_units"):
             value = getattr(self, name)
             if not (isinstance(value, int) and not isinstance(value, bool)) or value < 1:
                 raise bad(name, "an int >= 1")
-        try:
-            intensities = tuple(float(f) for f in self.doe_intensities)
-        except (TypeError, ValueError):
-            raise bad("doe_intensities", "a non-empty tuple of floats in (0, 1]") from None
-        if not intensities or not all(0.0 < f <= 1.0 for f in intensities):
-            raise bad("doe_intensities", "a non-empty tuple of floats in (0, 1]")
-        object.__setattr__(self, "doe_intensities", intensities)
+        for name in ("doe_intensities", "surrogate_doe_intensities"):
+            try:
+                intensities = tuple(float(f) for f in getattr(self, name))
+            except (TypeError, ValueError):
+                raise bad(name, "a non-empty tuple of floats in (0, 1]") from None
+            if not intensities or not all(0.0 < f <= 1.0 for f in intensities):
+                raise bad(name, "a non-empty tuple of floats in (0, 1]")
+            object.__setattr__(self, name, intensities)
 
     @classmethod
     def small(cls) -> KnowledgeSize:
-        """A quick build for tests: 1 DOE unit at 2 intensities, 4 x 4 published and 6 x 5 surrogate healthy flights."""
+        """A quick build for tests: 1 DOE unit at 2 intensities, 4 x 4 published and 6 x 5 surrogate healthy
+        flights, a surrogate DOE of 2 units at 2 intensities."""
         return cls(doe_units=1, doe_intensities=(0.5, 1.0), healthy_units=4, healthy_flights=4,
-                   surrogate_units=6, surrogate_flights=5)
+                   surrogate_units=6, surrogate_flights=5, surrogate_doe_units=2,
+                   surrogate_doe_intensities=(0.5, 1.0))
 
     @classmethod
     def coerce(cls, value: object, owner: str) -> KnowledgeSize:
@@ -403,34 +414,110 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
     return table.copy()
 
 
+def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
+                  drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
+                  progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+    """Design of experiments on the scored fleet's model (what the surrogate's responses are learnt on), cached.
+
+    Unlike the published DOE (:func:`published_knowledge`, on the published
+    model), this one flies the scenario's truth model (hidden effects), with
+    the scored fleet's drift when ``drifted``, its mission, sensor and
+    dispersion: ``size.surrogate_doe_units`` units at
+    ``size.surrogate_doe_intensities``, seeded from the test seed.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The table of :func:`fuelhm_bench.diagnosis.doe.run_doe` (a copy).
+    """
+    from fuelhm_bench.diagnosis.doe import DesignOfExperiments, run_doe
+
+    sc = resolve_scenario(scenario)
+    _check_minutes(flight_minutes, "surrogate_doe")
+    size = KnowledgeSize() if size is None else size
+    config = _with_minutes(sc.test_fleet_config(), flight_minutes)
+    drifted = bool(drifted) and bool(sc.drift)
+    nominal = sc.drifted_model() if drifted else sc.truth_model()
+    doe = DesignOfExperiments(n_units=size.surrogate_doe_units, intensities=size.surrogate_doe_intensities,
+                              mission=config.mission, nominal=nominal, dispersion=config.dispersion,
+                              seed=config.seed + 1)
+    params = {"units": size.surrogate_doe_units, "intensities": list(size.surrogate_doe_intensities),
+              "drifted": drifted}
+    key = cache_key("surrogate-doe", sc, flight_minutes=flight_minutes, **params)
+
+    def make() -> dict[str, pd.DataFrame]:
+        return {"table": run_doe(doe, progress=progress)}
+
+    table = _cached(key, _entry(cache_dir, "surrogate-doe", sc, key), ("table",), make, lambda t: t["table"],
+                    {"scenario": sc.id, "kind": "surrogate-doe", "flight_minutes": flight_minutes, **params})
+    return table.copy()
+
+
+def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
+                      drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
+                      progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+    """Healthy flights of new units of the scored fleet's model (what the surrogate's healthy law is learnt on), cached.
+
+    ``size.surrogate_units x size.surrogate_flights`` healthy flights of units
+    manufactured like the scored fleet's (truth model with hidden effects, the
+    scored fleet's drift when ``drifted``, its mission, sensor and dispersion)
+    but seeded apart from both the training fleet and the scored fleet: the
+    surrogate must not be learnt on the very flights methods are fitted on
+    (a model always looks better on the flights it has seen, so a surrogate
+    made of them would flatter every method).
+
+    Returns
+    -------
+    pandas.DataFrame
+        The table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
+    """
+    from fuelhm_bench.datasets import fleet_indicators
+
+    sc = resolve_scenario(scenario)
+    _check_minutes(flight_minutes, "surrogate_healthy")
+    size = KnowledgeSize() if size is None else size
+    config = _with_minutes(sc.test_fleet_config(), flight_minutes)
+    drifted = bool(drifted) and bool(sc.drift)
+    config = dataclasses.replace(config, n_units=size.surrogate_units, n_flights=size.surrogate_flights,
+                                 schedules=(), simultaneous=True, seed=config.seed + 2,
+                                 nominal=sc.drifted_model() if drifted else sc.truth_model())
+    params = {"units": size.surrogate_units, "flights": size.surrogate_flights, "drifted": drifted}
+    key = cache_key("surrogate-healthy", sc, flight_minutes=flight_minutes, **params)
+
+    def make() -> dict[str, pd.DataFrame]:
+        return {"table": fleet_indicators(config, progress=progress)[0]}
+
+    table = _cached(key, _entry(cache_dir, "surrogate-healthy", sc, key), ("table",), make, lambda t: t["table"],
+                    {"scenario": sc.id, "kind": "surrogate-healthy", "flight_minutes": flight_minutes, **params})
+    return table.copy()
+
+
 def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                         drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
                         progress: Callable[[int], object] | None = None):
-    """What the surrogate fidelity draws from: the published ITL and a healthy model of the scored fleet.
+    """What the surrogate fidelity is learnt from: physics flights of new units of the scored fleet's model.
 
-    The ITL (and signatures, DOE table) are those of :func:`published_knowledge`.
-    The healthy model is the published recipe (:class:`~fuelhm_bench.diagnosis.HealthyModel`)
-    fitted on ``size.surrogate_units x size.surrogate_flights`` healthy flights of
-    the scenario's training fleet (truth model: hidden effects included), with
-    the scored fleet's drift when ``drifted``: the healthy state of the scored
-    units, independent of how little training data a scenario gives methods.
+    ``healthy_table``: :func:`surrogate_healthy` (units independent of the
+    training fleet methods are fitted on); ``doe_table``: :func:`surrogate_doe`.
+    The ITL and signatures are the published ones (:func:`published_knowledge`);
+    the healthy model is the published recipe fitted on ``healthy_table``.
+    :meth:`SurrogateModel.from_knowledge <fuelhm_bench.envs.surrogate.SurrogateModel.from_knowledge>`
+    learns the surrogate from the two tables.
 
     Returns
     -------
     KnowledgeResult
-        ``healthy_table`` is that healthy table (with ``unit_id``).
     """
     from fuelhm_bench.diagnosis.healthy import HealthyModel
     from fuelhm_bench.knowledge import KnowledgeResult
 
     size = KnowledgeSize() if size is None else size
-    published = published_knowledge(scenario, flight_minutes=flight_minutes, size=size, cache_dir=cache_dir,
-                                    progress=progress)
-    table = training_indicators(scenario, flight_minutes=flight_minutes, units=size.surrogate_units,
-                                flights=size.surrogate_flights, drifted=drifted, cache_dir=cache_dir,
-                                progress=progress)
+    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
+    published = published_knowledge(scenario, size=size, **common)
+    table = surrogate_healthy(scenario, size=size, drifted=drifted, **common)
+    doe = surrogate_doe(scenario, size=size, drifted=drifted, **common)
     return KnowledgeResult(published.itl, HealthyModel().fit(table), published.signatures,
-                           dict(published.max_intensity), published.doe_table, table)
+                           dict(published.max_intensity), doe, table)
 
 
 def _refit(healthy: pd.DataFrame, doe: pd.DataFrame, max_intensity: dict):

@@ -1,207 +1,441 @@
-"""The surrogate fidelity: healthy Gaussian draws shifted by the indicator transformation laws.
+"""The surrogate fidelity: indicator draws learnt from physics flights.
 
-Paper (Lamoureux, Massé & Mechbal 2012) eq. 4 predicts the indicators of a
-degraded flight from healthy ones, ``I_deg = I_healthy + A * intensity``. The
-surrogate turns it into a simulator:
+The surrogate replaces the simulation and the extraction of a flight by a draw
+whose law is learnt, once, from two indicator tables simulated by the physics
+(:func:`fit_surrogate`, a pure function of the tables; the cached call site is
+:func:`fuelhm_bench.envs.cache.surrogate_knowledge`):
 
-1. **Healthy indicators** of a unit's flights are drawn from the published
-   healthy Gaussian model ``N(mean_, cov_)``
-   (:class:`~fuelhm_bench.diagnosis.HealthyModel`), split into a *unit* part
-   drawn once per unit (manufacturing dispersion) and a *flight* part drawn
-   per flight (operating conditions, noise)::
+* a **healthy table** of many units flying several flights each (``unit_id``
+  column), with the scored fleet's truth model (hidden effects, drift);
+* a **design of experiments** (:func:`fuelhm_bench.diagnosis.doe.run_doe`): each
+  DOE unit flies one flight healthy and with each mode at each intensity, the
+  same mission and noise every time, so that ``I(unit, mode, f) - I(unit, healthy)``
+  is the unit's own response to the degradation.
 
-       I_healthy[unit, flight] = mean_ + L_unit u[unit] + L_flight e[unit, flight]
-       u, e ~ N(0, identity),   L_unit L_unit^T + L_flight L_flight^T = cov_ (exactly)
+The indicators are every column ``c`` of the tables that has a ``c_valid``
+companion (the ten of Table I, and any extended indicator the extractor adds).
+A unit's flights are then drawn as::
 
-   The split is estimated on the healthy table the model was fitted on, in
-   the coordinates whitened by ``cov_`` (one-way random-effects estimator:
-   ``B = (MS_between - MS_within) / n0``, eigenvalues clipped to [0, 1]), so
-   each indicator keeps the published mean and standard deviation while
-   consecutive flights of a unit are correlated as in the physics (most of
-   the healthy spread of the indicators is unit-to-unit). With fewer than two
-   units or too few flights the whole covariance is per flight.
-2. **Degradation**: ``I = I_healthy + intensity @ A`` with ``A`` the ITL
-   slopes (indicator unit per unit intensity, 0 where a law is missing) and
-   ``intensity`` the 7 mode intensities of the flight (several modes add up).
-3. **Structure**: ``Inb = (X1 + X2) / 2`` is restored after both steps (it
-   holds exactly on board, paper Table I); every indicator is valid.
+    I[flight] = mean + u + r[flight] + sum_m D_m(f_m[flight])
 
-What the surrogate does not reproduce: invalid indicators, the curvature of
-the laws (they are linear by construction), nominal-parameter drift of the
-scored fleet, and interactions between simultaneous modes.
+1. ``mean``: the healthy mean of the table.
+2. ``u ~ N(0, B)``, drawn once per unit: the unit-to-unit part. ``B`` is the
+   one-way random-effects (ANOVA) estimate of the between-unit covariance,
+   ``(MS_between - MS_within) / n0``, with negative eigenvalues set to 0. Its
+   small directions are those of the physics: an exact relation of the
+   indicators (``Inb = (X1 + X2) / 2``) holds for every unit mean, so ``B`` has
+   no variance across it.
+3. ``r``: a flight-to-flight residual *resampled* from the physics: a row of
+   the pooled within-unit residuals ``x - unit mean`` (inflated by
+   ``sqrt(n_u / (n_u - 1))`` so that their variance is unbiased), drawn with
+   replacement, together with its pattern of invalid indicators. The full
+   flight-to-flight covariance, its small directions, its non-Gaussian tails
+   and the joint patterns of invalid indicators are those of real flights,
+   not of a fitted Gaussian.
+4. ``D_m(f)``: the response of mode ``m`` at intensity ``f``, piecewise linear
+   between the DOE intensities (0 at 0, the last segment continued beyond
+   the largest), of a DOE unit drawn once per unit and mode: the curvature of
+   the laws and their unit-to-unit spread are those of the DOE. A DOE flight
+   that made an indicator invalid makes it invalid in the surrogate (between
+   two DOE intensities the nearer one's pattern is used with a probability
+   given by the distance). Simultaneous modes add their responses.
+
+Estimation error. Everything is estimated from a finite physics sample, and
+the fitted surrogate says how much (:attr:`SurrogateModel.fit_info`,
+:meth:`SurrogateModel.describe`): the number of units and residual rows, and
+a unit-bootstrap standard error of every indicator's healthy standard
+deviation and unit share (the tables are resampled by unit, the estimators
+refitted). The residual pool reuses physics rows: a surrogate fleet of ``n``
+flights repeats each of the ``R`` pooled rows about ``n / R`` times (the
+residuals are combined with fresh unit effects and responses, so whole
+flights are not repeated).
+
+What the surrogate does not reproduce: interactions between simultaneous
+modes (their responses add), any dependence of a mode's response on the
+unit's healthy state or on the flight's conditions beyond what the DOE unit
+drawn carries, correlation between consecutive flights of a unit beyond the
+shared unit effect, and unit effects that are far from Gaussian (their
+covariance is kept, their shape is not).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from fuelhm_bench.errors import DataFormatError
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 
-__all__ = ["SurrogateModel"]
-
-_X1, _X2, _INB = (INDICATOR_NAMES.index(n) for n in ("X1", "X2", "Inb"))
+__all__ = ["SurrogateModel", "fit_surrogate", "indicator_columns"]
 
 
-def _sqrt_psd(matrix: np.ndarray) -> np.ndarray:
-    """Symmetric square root of a symmetric positive semi-definite matrix."""
+def indicator_columns(table: pd.DataFrame) -> tuple[str, ...]:
+    """Indicator columns of a table: every ``c`` with a ``c_valid`` companion, in table order.
+
+    Examples
+    --------
+    >>> indicator_columns(pd.DataFrame(columns=["unit_id", "X1", "X1_valid", "G_in", "G_in_valid"]))
+    ('X1', 'G_in')
+    """
+    cols = set(map(str, table.columns))
+    return tuple(str(c) for c in table.columns if f"{c}_valid" in cols and not str(c).endswith("_valid"))
+
+
+def _values(table: pd.DataFrame, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Values (NaN where invalid) and validity of the indicator columns."""
+    x = np.column_stack([pd.to_numeric(table[n], errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
+                         for n in names]) if names else np.empty((len(table), 0))
+    valid = np.column_stack([table[f"{n}_valid"].to_numpy(dtype=bool) for n in names]) if names else x.astype(bool)
+    valid &= np.isfinite(x)
+    return np.where(valid, x, np.nan), valid
+
+
+def _psd(matrix: np.ndarray) -> np.ndarray:
+    """Nearest (Frobenius) symmetric positive semi-definite matrix: negative eigenvalues set to 0."""
     w, v = np.linalg.eigh(0.5 * (matrix + matrix.T))
-    return (v * np.sqrt(np.clip(w, 0.0, None))) @ v.T
+    return (v * np.clip(w, 0.0, None)) @ v.T
 
 
-def _between_share(z: np.ndarray, units: np.ndarray) -> np.ndarray:
-    """Between-unit covariance of whitened rows ``z`` (eigenvalues in [0, 1]); zeros when not estimable."""
-    p = z.shape[1]
-    labels, counts = np.unique(units, return_counts=True)
-    k, n = len(labels), len(z)
-    if k < 2 or n - k < 1:
-        return np.zeros((p, p))
-    grand = z.mean(axis=0)
-    means = np.stack([z[units == u].mean(axis=0) for u in labels])
-    resid = z - means[np.searchsorted(labels, units)]
-    ms_within = resid.T @ resid / (n - k)
-    dev = means - grand
-    ms_between = (dev * counts[:, None]).T @ dev / (k - 1)
-    n0 = (n - (counts ** 2).sum() / n) / (k - 1)
-    b = (ms_between - ms_within) / n0
-    w, v = np.linalg.eigh(0.5 * (b + b.T))
-    return (v * np.clip(w, 0.0, 1.0)) @ v.T
+def _factor(matrix: np.ndarray) -> np.ndarray:
+    """``L`` with ``L L^T = matrix`` (symmetric PSD); eigenvalues below rounding (1e-12 of the largest) are 0."""
+    w, v = np.linalg.eigh(0.5 * (matrix + matrix.T))
+    w = np.where(w > 1e-12 * max(float(w.max(initial=0.0)), 0.0), w, 0.0)
+    return v * np.sqrt(w)
+
+
+def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray):
+    """Mean, between-unit covariance, pooled residuals (0 where invalid) and their validity."""
+    p = x.shape[1]
+    mean = np.nanmean(np.where(valid, x, np.nan), axis=0) if len(x) else np.full(p, np.nan)
+    labels, inverse = np.unique(units, return_inverse=True)
+    k = len(labels)
+    counts = np.zeros((k, p))
+    np.add.at(counts, inverse, valid.astype(np.float64))
+    sums = np.zeros((k, p))
+    np.add.at(sums, inverse, np.where(valid, x, 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit_mean = sums / counts
+    resid = np.where(valid, x - unit_mean[inverse], 0.0)
+    n_row = counts[inverse]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inflate = np.where(n_row > 1, np.sqrt(n_row / np.maximum(n_row - 1, 1)), 0.0)
+    resid = resid * inflate
+    # residual rows that carry information: the unit flew more than one flight
+    keep = (n_row > 1).any(axis=1)
+    # Between-unit covariance on complete rows (one-way ANOVA, unbalanced: n0).
+    complete = valid.all(axis=1)
+    between = np.zeros((p, p))
+    if complete.any():
+        lab_c, inv_c, cnt_c = np.unique(inverse[complete], return_inverse=True, return_counts=True)
+        xc = x[complete]
+        kc, nc = len(lab_c), len(xc)
+        if kc >= 2 and nc - kc >= 1:
+            means = np.zeros((kc, p))
+            np.add.at(means, inv_c, xc)
+            means /= cnt_c[:, None]
+            within = xc - means[inv_c]
+            ms_within = within.T @ within / (nc - kc)
+            dev = means - xc.mean(axis=0)
+            ms_between = (dev * cnt_c[:, None]).T @ dev / (kc - 1)
+            n0 = (nc - (cnt_c ** 2).sum() / nc) / (kc - 1)
+            between = _psd((ms_between - ms_within) / n0)
+    return mean, between, resid[keep], valid[keep]
+
+
+def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...]):
+    """Knot intensities, per-DOE-unit responses ``(k, m, q + 1, p)`` and their invalidity."""
+    x, valid = _values(doe, names)
+    mode = doe["mode"].astype(str).to_numpy()
+    intensity = pd.to_numeric(doe["intensity"], errors="coerce").to_numpy(dtype=np.float64)
+    units = doe["unit_id"].to_numpy()
+    deg = mode != "healthy"
+    knots = np.unique(intensity[deg & np.isin(mode, modes)])
+    knots = knots[np.isfinite(knots) & (knots > 0)]
+    unit_labels = [u for u in pd.unique(units) if ((units == u) & (mode == "healthy")).any()]
+    k, m, q, p = len(unit_labels), len(modes), len(knots), len(names)
+    resp = np.full((k, m, q + 1, p), np.nan)
+    invalid = np.zeros((k, m, q + 1, p), dtype=bool)
+    resp[:, :, 0, :] = 0.0
+    for a, u in enumerate(unit_labels):
+        h = np.flatnonzero((units == u) & (mode == "healthy"))[0]
+        for b, md in enumerate(modes):
+            for c, f in enumerate(knots):
+                rows = np.flatnonzero((units == u) & (mode == md) & np.isclose(intensity, f))
+                if not len(rows):
+                    continue
+                r = rows[0]
+                resp[a, b, c + 1] = np.where(valid[r] & valid[h], x[r] - x[h], np.nan)
+                invalid[a, b, c + 1] = valid[h] & ~valid[r]
+    # A response that is unknown (invalid flight, missing case) takes the mean of the other DOE units; else 0.
+    known = np.isfinite(resp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fill = np.where(known, resp, 0.0).sum(axis=0) / known.sum(axis=0)
+    fill = np.where(np.isfinite(fill), fill, 0.0)
+    resp = np.where(np.isfinite(resp), resp, fill[None])
+    return knots, resp, invalid
 
 
 @dataclass(frozen=True, eq=False)
 class SurrogateModel:
-    """Healthy Gaussian draws plus linear ITL shifts (see the module docstring).
-
-    Build one with :meth:`from_knowledge`.
+    """A fitted surrogate (see the module docstring); build it with :func:`fit_surrogate`.
 
     Parameters
     ----------
-    mean : ndarray of shape (10,)
-        Healthy mean of the indicators, ``INDICATOR_NAMES`` order, units of
-        ``INDICATOR_UNITS`` (mA, mm/s, mm/s/mA).
-    unit_factor : ndarray of shape (10, 10)
-        ``L_unit`` (same units as ``mean`` per unit normal draw).
-    flight_factor : ndarray of shape (10, 10)
-        ``L_flight``.
-    shift : ndarray of shape (7, 10)
-        ITL slopes ``A`` (``MODE_IDS`` x ``INDICATOR_NAMES``, indicator unit per
-        unit intensity), 0 where no law exists.
-
-    Attributes
-    ----------
-    unit_share : ndarray of shape (10,)
-        Fraction of each indicator's healthy variance that is unit-to-unit.
+    names : tuple of str
+        Indicator columns drawn, in order (units: those of the physics tables,
+        mA, mm/s, mm/s/mA for the ten of Table I).
+    modes : tuple of str
+        Degradation modes, in the order of the intensity columns.
+    mean : ndarray of shape (p,)
+        Healthy mean.
+    unit_factor : ndarray of shape (p, p)
+        ``L`` with ``L L^T = B``, the between-unit covariance.
+    residuals : ndarray of shape (r, p)
+        Pooled within-unit residuals of the healthy physics flights (0 where invalid).
+    residual_valid : ndarray of shape (r, p), bool
+        Validity of those flights' indicators.
+    knots : ndarray of shape (q,)
+        DOE intensities (fraction of the Table III maximum), increasing, > 0.
+    responses : ndarray of shape (k, m, q + 1, p)
+        Response of each DOE unit to each mode at 0 and at each knot.
+    response_invalid : ndarray of shape (k, m, q + 1, p), bool
+        Indicators the degradation made invalid on that DOE flight.
+    fit_info : dict
+        Sizes of the physics sample (``healthy_units``, ``healthy_flights``,
+        ``residual_rows``, ``doe_units``) and unit-bootstrap standard errors
+        (``std_se``, ``unit_share_se``, arrays of shape (p,)).
     """
 
+    names: tuple
+    modes: tuple
     mean: np.ndarray
     unit_factor: np.ndarray
-    flight_factor: np.ndarray
-    shift: np.ndarray
+    residuals: np.ndarray
+    residual_valid: np.ndarray
+    knots: np.ndarray
+    responses: np.ndarray
+    response_invalid: np.ndarray
+    fit_info: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        p, m = len(INDICATOR_NAMES), len(MODE_IDS)
-        for name, shape in (("mean", (p,)), ("unit_factor", (p, p)), ("flight_factor", (p, p)), ("shift", (m, p))):
-            arr = np.array(getattr(self, name), dtype=np.float64, copy=True)
-            if arr.shape != shape or not np.all(np.isfinite(arr)):
+        names, modes = tuple(map(str, self.names)), tuple(map(str, self.modes))
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "modes", modes)
+        p, m = len(names), len(modes)
+        q = len(np.atleast_1d(self.knots))
+        k = np.shape(self.responses)[0] if np.ndim(self.responses) == 4 else -1
+        r = np.shape(self.residuals)[0] if np.ndim(self.residuals) == 2 else -1
+        shapes = {"mean": (p,), "unit_factor": (p, p), "residuals": (r, p), "residual_valid": (r, p),
+                  "knots": (q,), "responses": (k, m, q + 1, p), "response_invalid": (k, m, q + 1, p)}
+        for name, shape in shapes.items():
+            dtype = bool if name in ("residual_valid", "response_invalid") else np.float64
+            arr = np.array(getattr(self, name), dtype=dtype, copy=True)
+            if arr.shape != shape or min(shape, default=1) < 0 or not np.all(np.isfinite(arr)):
                 raise DataFormatError(f"The '{name}' parameter of SurrogateModel must be a finite array of shape "
                                       f"{shape}. Got shape {arr.shape} instead.")
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
+        if r < 1 or k < 1:
+            raise DataFormatError(f"A SurrogateModel needs at least one residual row and one DOE unit. Got {r} "
+                                  f"residual rows and {k} DOE units instead.")
+        if q and not (np.all(np.diff(self.knots) > 0) and self.knots[0] > 0):
+            raise DataFormatError(f"The 'knots' parameter of SurrogateModel must be increasing and > 0. "
+                                  f"Got {self.knots.tolist()} instead.")
+        object.__setattr__(self, "_grid", np.concatenate([[0.0], self.knots]))
 
     @classmethod
     def from_knowledge(cls, knowledge) -> SurrogateModel:
-        """The surrogate of a :class:`~fuelhm_bench.knowledge.KnowledgeResult`.
+        """:func:`fit_surrogate` on a :class:`~fuelhm_bench.knowledge.KnowledgeResult`'s ``healthy_table`` and ``doe_table``."""
+        return fit_surrogate(knowledge.healthy_table, knowledge.doe_table)
 
-        Parameters
-        ----------
-        knowledge : KnowledgeResult
-            Its ``healthy_model`` (all ten indicators), ``healthy_table`` (with
-            ``unit_id``) and ``itl`` are used.
-
-        Returns
-        -------
-        SurrogateModel
-
-        Raises
-        ------
-        DataFormatError
-            The healthy model does not cover the ten indicators in order.
-        """
-        hm = knowledge.healthy_model
-        if tuple(hm.features_) != tuple(INDICATOR_NAMES):
-            raise DataFormatError(f"The surrogate needs a healthy model of the ten indicators {list(INDICATOR_NAMES)}."
-                                  f" Got features {list(hm.features_)} instead.")
-        cov = np.asarray(hm.cov_, dtype=np.float64)
-        root = _sqrt_psd(cov)
-        w, v = np.linalg.eigh(0.5 * (cov + cov.T))
-        inv_root = (v / np.sqrt(np.clip(w, 1e-300, None))) @ v.T
-        table = knowledge.healthy_table
-        x = table[list(INDICATOR_NAMES)].to_numpy(dtype=np.float64)
-        valid = np.ones(len(table), dtype=bool)
-        for j, name in enumerate(INDICATOR_NAMES):
-            col = f"{name}_valid"
-            if col in table.columns:
-                valid &= table[col].to_numpy(dtype=bool)
-        complete = valid & np.isfinite(x).all(axis=1)
-        units = table["unit_id"].to_numpy() if "unit_id" in table.columns else np.zeros(len(table))
-        z = (x[complete] - hm.mean_) @ inv_root
-        between = _between_share(z, np.asarray(units)[complete])
-        within = np.eye(len(INDICATOR_NAMES)) - between
-        unit_factor = root @ _sqrt_psd(between)
-        flight_factor = root @ _sqrt_psd(within)
-        a = knowledge.itl.matrix("A").reindex(index=list(MODE_IDS), columns=list(INDICATOR_NAMES))
-        shift = a.to_numpy(dtype=np.float64)
-        return cls(np.asarray(hm.mean_, dtype=np.float64), unit_factor, flight_factor,
-                   np.where(np.isfinite(shift), shift, 0.0))
-
-    @property
-    def unit_share(self) -> np.ndarray:
-        b = (self.unit_factor ** 2).sum(axis=1)
-        total = b + (self.flight_factor ** 2).sum(axis=1)
-        return b / np.where(total > 0, total, 1.0)
-
-    def healthy(self, rng: np.random.Generator, n_flights: int) -> np.ndarray:
-        """Healthy indicators of the flights of one new unit.
+    # ------------------------------------------------------------------ draws
+    def draw_unit(self, rng: np.random.Generator, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Indicators of the flights of one new unit.
 
         Parameters
         ----------
         rng : numpy.random.Generator
-            Source of the draws (one call of ``standard_normal``).
-        n_flights : int
-            Number of flights.
+            Source of every draw of the unit.
+        intensities : ndarray of shape (n_flights, len(modes))
+            Mode intensities of each flight (fraction of the Table III maximum).
 
         Returns
         -------
-        ndarray of shape (n_flights, 10)
-            float64, ``INDICATOR_NAMES`` order and units.
+        values : ndarray of shape (n_flights, p)
+            float64, ``names`` order; 0 where invalid.
+        valid : ndarray of shape (n_flights, p), bool
         """
-        draws = rng.standard_normal((n_flights + 1, len(INDICATOR_NAMES)))
-        return self.mean + draws[0] @ self.unit_factor.T + draws[1:] @ self.flight_factor.T
+        parts = self.draw_parts(rng, len(intensities))
+        return self.degrade(parts, intensities)
 
-    def indicators(self, healthy: np.ndarray, intensities: np.ndarray) -> np.ndarray:
-        """Degraded indicators ``healthy + intensities @ shift`` with ``Inb = (X1 + X2) / 2``.
+    def draw_parts(self, rng: np.random.Generator, n_flights: int) -> dict:
+        """The random parts of one unit: healthy flights, chosen DOE units, uniforms for invalid patterns."""
+        p = len(self.names)
+        z = rng.standard_normal(p)
+        rows = rng.integers(0, len(self.residuals), n_flights)
+        doe_units = rng.integers(0, self.responses.shape[0], len(self.modes))
+        uniforms = rng.random((n_flights, len(self.modes)))
+        healthy = self.mean + self.unit_factor @ z + self.residuals[rows]
+        return {"healthy": healthy, "valid": self.residual_valid[rows], "doe_units": doe_units,
+                "uniforms": uniforms}
+
+    def degrade(self, parts: dict, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Add the mode responses to a unit's healthy flights (:meth:`draw_parts`).
 
         Parameters
         ----------
-        healthy : ndarray of shape (n, 10)
-            Healthy indicators (:meth:`healthy`).
-        intensities : ndarray of shape (n, 7)
-            Mode intensities of each flight (``MODE_IDS`` order, fraction of the
-            Table III maximum).
+        parts : dict
+            From :meth:`draw_parts` (any prefix of its flights may be passed by slicing
+            ``healthy``, ``valid`` and ``uniforms`` alike).
+        intensities : ndarray of shape (n, len(modes))
 
         Returns
         -------
-        ndarray of shape (n, 10)
+        values : ndarray of shape (n, p)
+            0 where invalid.
+        valid : ndarray of shape (n, p), bool
         """
-        out = healthy + intensities @ self.shift
-        out[:, _INB] = 0.5 * (out[:, _X1] + out[:, _X2])
-        return out
+        out = parts["healthy"].copy()
+        valid = parts["valid"].copy()
+        grid = self._grid
+        last = len(grid) - 1
+        intensities = np.asarray(intensities, dtype=np.float64)
+        if last == 0:  # no DOE intensity: no response known
+            return np.where(valid, out, 0.0), valid
+        for j in np.flatnonzero((intensities > 0).any(axis=0)):
+            f = intensities[:, j]
+            d = parts["doe_units"][j]
+            curve = self.responses[d, j]
+            # segment [grid[i0], grid[i0 + 1]]; beyond the largest knot the last segment continues (w > 1)
+            i0 = np.clip(np.searchsorted(grid, f, side="right") - 1, 0, last - 1)
+            w = (f - grid[i0]) / (grid[i0 + 1] - grid[i0])
+            out += (1.0 - w)[:, None] * curve[i0] + w[:, None] * curve[i0 + 1]
+            nearest = np.minimum(i0 + (parts["uniforms"][:, j] < w), last)
+            valid &= ~self.response_invalid[d, j, nearest]
+        return np.where(valid, out, 0.0), valid
+
+    # ------------------------------------------------------------------ summaries
+    @property
+    def unit_cov(self) -> np.ndarray:
+        """Between-unit covariance ``B``."""
+        return self.unit_factor @ self.unit_factor.T
+
+    @property
+    def flight_cov(self) -> np.ndarray:
+        """Covariance of the pooled residuals (rows with every indicator valid)."""
+        r = self.residuals[self.residual_valid.all(axis=1)]
+        return r.T @ r / max(len(r), 1)
+
+    @property
+    def unit_share(self) -> np.ndarray:
+        """Fraction of each indicator's healthy variance that is unit-to-unit."""
+        b = np.diag(self.unit_cov)
+        total = b + np.diag(self.flight_cov)
+        return b / np.where(total > 0, total, 1.0)
 
     def describe(self) -> pd.DataFrame:
-        """Mean, standard deviation and unit share of each healthy indicator (one row per indicator)."""
-        std = np.sqrt((self.unit_factor ** 2).sum(axis=1) + (self.flight_factor ** 2).sum(axis=1))
-        return pd.DataFrame({"mean": self.mean, "std": std, "unit_share": self.unit_share},
-                            index=pd.Index(INDICATOR_NAMES, name="indicator"))
+        """Mean, standard deviation, unit share (with unit-bootstrap standard errors) and invalid rate per indicator."""
+        std = np.sqrt(np.diag(self.unit_cov) + np.diag(self.flight_cov))
+        nan = np.full(len(self.names), np.nan)
+        return pd.DataFrame({"mean": self.mean, "std": std, "std_se": self.fit_info.get("std_se", nan),
+                             "unit_share": self.unit_share,
+                             "unit_share_se": self.fit_info.get("unit_share_se", nan),
+                             "invalid_rate": 1.0 - self.residual_valid.mean(axis=0)},
+                            index=pd.Index(self.names, name="indicator"))
+
+
+def _fit_healthy(x, valid, units):
+    mean, between, resid, rvalid = _healthy_parts(x, valid, units)
+    if not len(resid):
+        raise DataFormatError("The healthy table of the surrogate needs at least one unit with two flights or "
+                              "more (its flight-to-flight residuals). Got none.")
+    if not np.all(np.isfinite(mean)):
+        bad = np.flatnonzero(~np.isfinite(mean))
+        raise DataFormatError(f"The healthy table of the surrogate has no valid value of indicator(s) "
+                              f"{bad.tolist()}.")
+    return mean, between, resid, rvalid
+
+
+def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | None = None,
+                  bootstrap: int = 50, seed: int = 0) -> SurrogateModel:
+    """Learn a :class:`SurrogateModel` from physics indicator tables (a pure function of the tables).
+
+    Parameters
+    ----------
+    healthy : pandas.DataFrame
+        Healthy flights: ``unit_id``, the indicator columns and their ``<name>_valid``
+        companions (:func:`fuelhm_bench.datasets.fleet_indicators`). At least one
+        unit with two flights; two units or more for the unit-to-unit part.
+    doe : pandas.DataFrame
+        Design-of-experiments table (:func:`fuelhm_bench.diagnosis.doe.run_doe`):
+        ``unit_id``, ``mode`` (``"healthy"`` or a mode id), ``intensity`` and the
+        same indicator columns.
+    modes : tuple of str or None, default=None
+        Mode order of the intensities the surrogate is given; None: ``MODE_IDS``.
+    bootstrap : int, default=50
+        Unit-bootstrap replicates for the standard errors of :meth:`SurrogateModel.describe`
+        (0: none).
+    seed : int, default=0
+        Seed of the bootstrap.
+
+    Returns
+    -------
+    SurrogateModel
+
+    Raises
+    ------
+    DataFormatError
+        Missing columns, no indicator column, no usable residual or DOE unit.
+    """
+    from fuelhm_bench.taxonomy import MODE_IDS
+
+    modes = tuple(MODE_IDS) if modes is None else tuple(modes)
+    for name, table, needed in (("healthy", healthy, ("unit_id",)), ("doe", doe, ("unit_id", "mode", "intensity"))):
+        if not isinstance(table, pd.DataFrame):
+            raise DataFormatError(f"The '{name}' table of fit_surrogate must be a pandas DataFrame. "
+                                  f"Got {type(table).__name__} instead.")
+        missing = [c for c in needed if c not in table.columns]
+        if missing:
+            raise DataFormatError(f"The '{name}' table of fit_surrogate lacks the column(s) {missing}.")
+    names = indicator_columns(healthy)
+    if not names:
+        raise DataFormatError("The 'healthy' table of fit_surrogate has no indicator column (a column 'c' with a "
+                              "'c_valid' companion).")
+    absent = [n for n in names if n not in doe.columns or f"{n}_valid" not in doe.columns]
+    if absent:
+        raise DataFormatError(f"The 'doe' table of fit_surrogate lacks the indicator column(s) {absent} of the "
+                              f"healthy table.")
+    x, valid = _values(healthy, names)
+    units = healthy["unit_id"].to_numpy()
+    mean, between, resid, rvalid = _fit_healthy(x, valid, units)
+    knots, resp, invalid = _responses(doe, names, modes)
+    if resp.shape[0] < 1:
+        raise DataFormatError("The 'doe' table of fit_surrogate has no unit with a healthy flight.")
+    labels = pd.unique(units)
+    info = {"healthy_units": int(len(labels)), "healthy_flights": int(len(healthy)),
+            "residual_rows": int(len(resid)), "doe_units": int(resp.shape[0]),
+            "doe_intensities": knots.tolist()}
+    if bootstrap and len(labels) >= 3:
+        rng = np.random.default_rng(seed)
+        stds, shares = [], []
+        index = {u: np.flatnonzero(units == u) for u in labels}
+        for _ in range(int(bootstrap)):
+            pick = rng.integers(0, len(labels), len(labels))
+            rows = np.concatenate([index[labels[i]] for i in pick])
+            new_units = np.concatenate([np.full(len(index[labels[i]]), b) for b, i in enumerate(pick)])
+            try:
+                _, b_cov, r, rv = _fit_healthy(x[rows], valid[rows], new_units)
+            except DataFormatError:
+                continue
+            rr = r[rv.all(axis=1)]
+            w = np.diag(rr.T @ rr / max(len(rr), 1))
+            bd = np.diag(b_cov)
+            stds.append(np.sqrt(bd + w))
+            shares.append(bd / np.where(bd + w > 0, bd + w, 1.0))
+        if len(stds) >= 2:
+            info["std_se"] = np.std(stds, axis=0, ddof=1)
+            info["unit_share_se"] = np.std(shares, axis=0, ddof=1)
+    return SurrogateModel(names=names, modes=modes, mean=mean, unit_factor=_factor(between), residuals=resid,
+                          residual_valid=rvalid, knots=knots, responses=resp, response_invalid=invalid,
+                          fit_info=info)

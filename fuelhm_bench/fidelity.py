@@ -1,0 +1,336 @@
+"""Fidelity check: does the surrogate rank methods as the physics does?
+
+:func:`fidelity_check` evaluates a panel of methods on one scenario at both
+fidelities (the same scored units, the same methods, the same training data)
+and compares what a user would conclude from each:
+
+* **ranking**: Kendall's tau (``scipy.stats.kendalltau``, tau-b: ties
+  allowed) between the methods' summary scores at the two fidelities;
+* **summary score**: each method's surrogate minus physics difference;
+* **per mode**: each method's detection rate at its own alarm (``1 -
+  fnr_standard`` of the ``method_alarm`` rows of Table V) and false
+  classification rate (``fcr``) at both fidelities.
+
+The targets (:data:`TARGETS`) are those of the benchmark: tau >= 0.8, every
+summary score within 5 points, every per-mode false classification rate
+within 0.05. :class:`FidelityReport` says which are met and which are not
+(:attr:`FidelityReport.failures`). Running the panel goes through one
+function, :func:`_run_panel`, which is the only caller of the evaluation
+harness here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from fuelhm_bench.errors import ParameterError
+
+__all__ = ["PANEL", "TARGETS", "FidelityReport", "compare_outcomes", "fidelity_check", "plot_fidelity"]
+
+#: The reference panel: the shipped baselines and detectors of different inductive biases
+#: (short name -> ``module:Class`` entry point of ``baselines/``).
+PANEL: dict[str, str] = {
+    "null": "baselines.trivial:NullMethod",
+    "random": "baselines.trivial:RandomMethod",
+    "paper-mahalanobis": "baselines.paper_mahalanobis:PaperMahalanobis",
+    "isolation-forest": "baselines.isolation_forest:IsolationForestMethod",
+    "itl-classifier": "baselines.itl_classifier:ITLClassifierMethod",
+    "full-gaussian": "baselines.gaussian_full:FullGaussianMethod",
+    "gaussian-mixture": "baselines.gaussian_mixture:GaussianMixtureMethod",
+    "one-class-svm": "baselines.one_class_svm:OneClassSVMMethod",
+    "nearest-neighbour": "baselines.nearest_neighbour:NearestNeighbourMethod",
+}
+
+#: Agreement targets: minimum Kendall tau, maximum |summary-score difference| [points],
+#: maximum |per-mode false-classification-rate difference|.
+TARGETS: dict[str, float] = {"kendall_tau": 0.8, "summary_points": 5.0, "fcr": 0.05}
+
+FIDELITIES = ("physics", "surrogate")
+
+
+@dataclass(frozen=True, eq=False)
+class FidelityReport:
+    """What :func:`fidelity_check` measured on one scenario.
+
+    Attributes
+    ----------
+    scenario : str
+        Scenario id.
+    methods : pandas.DataFrame
+        One row per method: ``method``, ``status_physics``, ``status_surrogate``,
+        ``summary_physics``, ``summary_surrogate``, ``summary_diff`` (surrogate
+        minus physics, points), ``message`` (what went wrong, if a run failed),
+        ``rank_physics``, ``rank_surrogate`` (1 = best).
+    modes : pandas.DataFrame
+        One row per (method, mode): ``detection_physics``, ``detection_surrogate``,
+        ``detection_diff``, ``fcr_physics``, ``fcr_surrogate``, ``fcr_diff``
+        (NaN where a rate is undefined, e.g. no alarm on that mode).
+    kendall_tau : float
+        Between the summary scores of the methods that ran at both fidelities.
+    kendall_p : float
+        Its two-sided p-value (no association).
+    targets : dict
+        The targets checked (:data:`TARGETS`).
+    seconds : dict
+        Wall time per fidelity [s] (data preparation and the panel).
+    """
+
+    scenario: str
+    methods: pd.DataFrame
+    modes: pd.DataFrame
+    kendall_tau: float
+    kendall_p: float
+    targets: dict = field(default_factory=lambda: dict(TARGETS))
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def failures(self) -> list[str]:
+        """Every target not met, in words (empty when all are met)."""
+        t = self.targets
+        out = []
+        if not (self.kendall_tau >= t["kendall_tau"]):
+            out.append(f"Kendall tau {self.kendall_tau:.2f} < {t['kendall_tau']:g}")
+        for _, row in self.methods.iterrows():
+            if row["status_physics"] != "ok" or row["status_surrogate"] != "ok":
+                out.append(f"{row['method']} did not run at both fidelities ({row['status_physics']}/"
+                           f"{row['status_surrogate']})")
+            elif abs(row["summary_diff"]) > t["summary_points"]:
+                out.append(f"{row['method']} summary {row['summary_surrogate']:.1f} (surrogate) vs "
+                           f"{row['summary_physics']:.1f} (physics)")
+        for _, row in self.modes.iterrows():
+            if np.isfinite(row["fcr_diff"]) and abs(row["fcr_diff"]) > t["fcr"]:
+                out.append(f"{row['method']} FCR on {row['mode']} {row['fcr_surrogate']:.2f} (surrogate) vs "
+                           f"{row['fcr_physics']:.2f} (physics)")
+        return out
+
+    @property
+    def passed(self) -> bool:
+        """True when every target is met."""
+        return not self.failures
+
+    def summary(self) -> pd.Series:
+        """One line of the fidelity table: tau, worst differences, verdict."""
+        ok = self.methods[(self.methods["status_physics"] == "ok") & (self.methods["status_surrogate"] == "ok")]
+        fcr = self.modes["fcr_diff"].abs()
+        det = self.modes["detection_diff"].abs()
+        worst = ok.loc[ok["summary_diff"].abs().idxmax()] if len(ok) else None
+        return pd.Series({
+            "scenario": self.scenario, "methods": int(len(ok)), "kendall_tau": round(self.kendall_tau, 3),
+            "max_summary_diff": round(float(ok["summary_diff"].abs().max()), 1) if len(ok) else np.nan,
+            "worst_method": "" if worst is None else worst["method"],
+            "max_fcr_diff": round(float(fcr.max()), 3) if fcr.notna().any() else np.nan,
+            "max_detection_diff": round(float(det.max()), 3) if det.notna().any() else np.nan,
+            "verdict": "pass" if self.passed else f"FAIL ({len(self.failures)})"})
+
+    def to_markdown(self) -> str:
+        """The report as Markdown (summary line, per-method table, per-mode table, failures)."""
+        lines = [f"# Fidelity check: {self.scenario}", "",
+                 f"Kendall tau (summary scores, {len(self.methods)} methods): {self.kendall_tau:.3f} "
+                 f"(p = {self.kendall_p:.3g}); targets: tau >= {self.targets['kendall_tau']:g}, "
+                 f"|summary diff| <= {self.targets['summary_points']:g} points, |FCR diff| <= "
+                 f"{self.targets['fcr']:g}.", "", "## Methods", "",
+                 _markdown(self.methods.round(2)), "", "## Per mode (detection at the method's alarm, FCR)", "",
+                 _markdown(self.modes.round(3)), "", "## Verdict", ""]
+        lines += [f"- {f}" for f in self.failures] or ["All targets met."]
+        return "\n".join(lines) + "\n"
+
+    def write(self, out: Path) -> list[Path]:
+        """Write ``methods.csv``, ``modes.csv``, ``report.md`` and ``fidelity.png`` into ``out``."""
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = [out / "methods.csv", out / "modes.csv", out / "report.md", out / "fidelity.png"]
+        self.methods.to_csv(paths[0], index=False)
+        self.modes.to_csv(paths[1], index=False)
+        paths[2].write_text(self.to_markdown(), encoding="utf-8")
+        plot_fidelity(self, paths[3])
+        return paths
+
+
+def _markdown(table: pd.DataFrame) -> str:
+    cols = [str(c) for c in table.columns]
+    rows = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for _, r in table.iterrows():
+        rows.append("| " + " | ".join("" if (isinstance(v, float) and np.isnan(v)) else str(v) for v in r) + " |")
+    return "\n".join(rows)
+
+
+def _per_mode(scorecard) -> pd.DataFrame:
+    """Detection rate at the method's alarm and FCR, per true mode (``"all"`` excluded)."""
+    from fuelhm_bench.scoring.detection import ALL_MODES, METHOD_ALARM
+
+    det = scorecard.detection
+    det = det[(det["operating_point"] == METHOD_ALARM) & (det["mode"] != ALL_MODES)]
+    detection = pd.Series(1.0 - det["fnr_standard"].to_numpy(dtype=float), index=det["mode"].to_numpy())
+    cls = scorecard.classification
+    cls = cls[cls["mode"] != ALL_MODES]
+    fcr = pd.Series(cls["fcr"].to_numpy(dtype=float), index=cls["mode"].to_numpy())
+    return pd.DataFrame({"detection": detection, "fcr": fcr})
+
+
+def compare_outcomes(scenario: str, outcomes: dict[str, dict], *, targets: dict | None = None,
+                     seconds: dict | None = None) -> FidelityReport:
+    """Compare the outcomes of a panel at the two fidelities (pure: outcomes in, report out).
+
+    Parameters
+    ----------
+    scenario : str
+        Scenario id.
+    outcomes : dict
+        ``{"physics": {name: outcome}, "surrogate": {name: outcome}}``; an outcome
+        has ``ok``, ``status`` and ``score()`` (:class:`fuelhm_bench.runner.EnvOutcome`).
+    targets : dict or None, default=None
+        Overrides of :data:`TARGETS`.
+    seconds : dict or None, default=None
+
+    Returns
+    -------
+    FidelityReport
+    """
+    from scipy.stats import kendalltau
+
+    names = list(dict.fromkeys([*outcomes["physics"], *outcomes["surrogate"]]))
+    rows, mode_rows = [], []
+    for name in names:
+        row = {"method": name}
+        cards = {}
+        for fid in FIDELITIES:
+            out = outcomes[fid].get(name)
+            row[f"status_{fid}"] = "missing" if out is None else out.status
+            cards[fid] = out.score() if out is not None and out.ok else None
+            row[f"summary_{fid}"] = float(cards[fid].summary_score) if cards[fid] is not None else np.nan
+        row["summary_diff"] = row["summary_surrogate"] - row["summary_physics"]
+        messages = [getattr(outcomes[f].get(name), "message", "") or "" for f in FIDELITIES]
+        row["message"] = next((m.strip().splitlines()[-1] for m in messages if m.strip()), "")
+        rows.append(row)
+        if all(c is not None for c in cards.values()):
+            pm = {fid: _per_mode(c) for fid, c in cards.items()}
+            for mode in pm["physics"].index.union(pm["surrogate"].index):
+                r = {"method": name, "mode": mode}
+                for what in ("detection", "fcr"):
+                    for fid in FIDELITIES:
+                        r[f"{what}_{fid}"] = float(pm[fid][what].get(mode, np.nan))
+                    r[f"{what}_diff"] = r[f"{what}_surrogate"] - r[f"{what}_physics"]
+                mode_rows.append(r)
+    methods = pd.DataFrame(rows)
+    ok = methods["summary_physics"].notna() & methods["summary_surrogate"].notna()
+    for fid in FIDELITIES:
+        methods[f"rank_{fid}"] = methods[f"summary_{fid}"].rank(ascending=False, method="min")
+    if ok.sum() >= 2:
+        res = kendalltau(methods.loc[ok, "summary_physics"], methods.loc[ok, "summary_surrogate"])
+        tau, p = float(res.statistic), float(res.pvalue)
+    else:
+        tau, p = float("nan"), float("nan")
+    columns = ["method", "mode"] + [f"{w}_{s}" for w in ("detection", "fcr") for s in (*FIDELITIES, "diff")]
+    modes = pd.DataFrame(mode_rows, columns=columns)
+    return FidelityReport(scenario, methods, modes, tau, p, {**TARGETS, **(targets or {})}, dict(seconds or {}))
+
+
+def _run_panel(methods: dict, scenario, fidelity: str, *, seed, scale, flight_minutes, knowledge_size,
+               cache_dir, random_state, timeout_s, progress) -> dict:
+    """The one place that calls the evaluation harness: prepare a fidelity once, run every method on it."""
+    from fuelhm_bench.runner import prepare_evaluation, run_in_env
+
+    evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
+                                    flight_minutes=flight_minutes, robustness=False,
+                                    knowledge_size=knowledge_size, cache_dir=cache_dir)
+    out = {}
+    for name, method in methods.items():
+        if progress is not None:
+            progress(f"{evaluation.scenario.id}: {name} at {fidelity} fidelity")
+        out[name] = run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s)
+    return out
+
+
+def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = None, scale: float = 1.0,
+                   flight_minutes: float | None = None, knowledge_size=None, cache_dir=None,
+                   random_state: int = 0, timeout_s: float = 600.0,
+                   progress: Callable[[str], object] | None = None) -> FidelityReport:
+    """Evaluate a panel of methods at both fidelities and compare their results.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+    methods : dict or None, default=None
+        ``{name: BaseMethod instance}``; None: :data:`PANEL` with default
+        hyperparameters (``baselines`` must be importable: run from the
+        repository root).
+    seed, scale, flight_minutes, knowledge_size, cache_dir
+        See :func:`fuelhm_bench.runner.prepare_evaluation` (the same for both fidelities).
+    random_state : int, default=0
+        Passed to every ``fit``.
+    timeout_s : float, default=600.0
+        Time limit of each method run [s].
+    progress : callable, optional
+        Called with a line of text before each run.
+
+    Returns
+    -------
+    FidelityReport
+    """
+    import time
+
+    from fuelhm_bench.envs.cache import resolve_scenario
+
+    sc = resolve_scenario(scenario)
+    if methods is None:
+        from fuelhm_bench.evaluation import load_method
+
+        methods = {name: load_method(spec) for name, spec in PANEL.items()}
+    if not isinstance(methods, dict) or len(methods) < 2:
+        raise ParameterError(f"The 'methods' parameter of fidelity_check must be a dict of at least two named "
+                             f"methods (a ranking needs two). Got {methods!r:.100} instead.")
+    outcomes, seconds = {}, {}
+    for fid in FIDELITIES:
+        t0 = time.perf_counter()
+        outcomes[fid] = _run_panel(methods, sc, fid, seed=seed, scale=scale, flight_minutes=flight_minutes,
+                                   knowledge_size=knowledge_size, cache_dir=cache_dir,
+                                   random_state=random_state, timeout_s=timeout_s, progress=progress)
+        seconds[fid] = round(time.perf_counter() - t0, 1)
+    return compare_outcomes(sc.id, outcomes, seconds=seconds)
+
+
+def plot_fidelity(report: FidelityReport, path) -> Path:
+    """Figure of a report: summary scores (surrogate vs physics, with the +/- target band) and FCR differences."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    m = report.methods
+    lo = float(np.nanmin([m["summary_physics"].min(), m["summary_surrogate"].min(), 0.0])) - 5
+    hi = float(np.nanmax([m["summary_physics"].max(), m["summary_surrogate"].max(), 100.0])) + 5
+    band = report.targets["summary_points"]
+    ax1.fill_between([lo, hi], [lo - band, hi - band], [lo + band, hi + band], color="0.9",
+                     label=f"within {band:g} points")
+    ax1.plot([lo, hi], [lo, hi], color="0.5", lw=1)
+    ax1.scatter(m["summary_physics"], m["summary_surrogate"], zorder=3)
+    for _, r in m.iterrows():
+        if np.isfinite(r["summary_physics"]) and np.isfinite(r["summary_surrogate"]):
+            ax1.annotate(r["method"], (r["summary_physics"], r["summary_surrogate"]), fontsize=7,
+                         xytext=(3, 3), textcoords="offset points")
+    ax1.set_xlabel("summary score, physics")
+    ax1.set_ylabel("summary score, surrogate")
+    ax1.set_title(f"{report.scenario}: Kendall tau = {report.kendall_tau:.2f}")
+    ax1.legend(loc="upper left", fontsize=8)
+    modes = report.modes.dropna(subset=["fcr_diff"])
+    if len(modes):
+        pivot = modes.pivot(index="mode", columns="method", values="fcr_diff")
+        pivot.plot.bar(ax=ax2, width=0.8, legend=False)
+        ax2.legend(fontsize=6, ncol=2)
+    t = report.targets["fcr"]
+    ax2.axhspan(-t, t, color="0.9", zorder=0)
+    ax2.axhline(0, color="0.5", lw=1)
+    ax2.set_ylabel("FCR, surrogate - physics")
+    ax2.set_title("false classification rate per mode")
+    ax2.tick_params(axis="x", labelrotation=30, labelsize=7)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

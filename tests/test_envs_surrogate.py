@@ -1,0 +1,213 @@
+"""The surrogate fidelity learnt from indicator tables (:func:`fuelhm_bench.envs.surrogate.fit_surrogate`).
+
+Synthetic physics-like tables with known structure (an exact linear relation, a tiny flight-to-flight
+direction, a unit share, invalid indicators, curved per-unit responses, an extended indicator) go in; the
+tests check that the fitted surrogate's draws carry the same structure. Pure numpy: no simulation, except
+the slow test against physics flights at the end.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fuelhm_bench.envs.surrogate import SurrogateModel, fit_surrogate, indicator_columns
+from fuelhm_bench.errors import DataFormatError
+
+NAMES = ["A", "B", "C", "D", "EXT"]  # C = (A + B) / 2 exactly; EXT stands for an extended indicator
+MODES = ("m1", "m2")
+
+
+def _table(values, valid, units, extra=None):
+    data = {"flight_id": np.arange(len(values)), "unit_id": units, **(extra or {})}
+    for j, n in enumerate(NAMES):
+        data[n] = np.where(valid[:, j], values[:, j], np.nan)
+    for j, n in enumerate(NAMES):
+        data[f"{n}_valid"] = valid[:, j]
+    return pd.DataFrame(data)
+
+
+def healthy_table(seed=0, n_units=60, n_flights=10, invalid_rate=0.1):
+    """Unit share 0.7 on A, B and D; C = (A + B) / 2; D has a tiny flight-to-flight variance; EXT is mostly unit."""
+    rng = np.random.default_rng(seed)
+    unit = rng.standard_normal((n_units, 5)) * np.array([2.0, 1.0, 0.0, 1.0, 3.0])
+    flight = rng.standard_normal((n_units, n_flights, 5)) * np.array([1.2, 0.6, 0.0, 1e-3, 0.1])
+    x = (unit[:, None, :] + flight).reshape(-1, 5) + np.array([1.0, 2.0, 0.0, 5.0, -3.0])
+    x[:, 2] = 0.5 * (x[:, 0] + x[:, 1])
+    valid = np.ones_like(x, dtype=bool)
+    valid[:, 3] = rng.random(len(x)) >= invalid_rate  # D invalid on about 10 % of the flights
+    return _table(x, valid, np.repeat(np.arange(n_units), n_flights),
+                  {"flight_index": np.tile(np.arange(n_flights), n_units)})
+
+
+def doe_table(seed=1, n_units=5, knots=(0.25, 0.5, 1.0)):
+    """m1 moves A (and C) as gain_u * f**2, gain_u different per unit; m2 makes B invalid from f = 1, moves D
+    by 4 f and A by f."""
+    rng = np.random.default_rng(seed)
+    rows, valid, units, mode, intensity = [], [], [], [], []
+    for u in range(n_units):
+        h = rng.standard_normal(5)
+        h[2] = 0.5 * (h[0] + h[1])
+        gain = 2.0 + u
+        for md, f in [("healthy", 0.0)] + [(m, f) for m in MODES for f in knots]:
+            x = h.copy()
+            ok = np.ones(5, dtype=bool)
+            if md == "m1":
+                x[0] += gain * f ** 2
+            elif md == "m2":
+                x[3] += 4.0 * f
+                x[0] += 1.0 * f
+                ok[1] = f < 1.0
+            x[2] = 0.5 * (x[0] + x[1])
+            rows.append(x)
+            valid.append(ok)
+            units.append(u)
+            mode.append(md)
+            intensity.append(f)
+    return _table(np.array(rows), np.array(valid), np.array(units),
+                  {"mode": mode, "intensity": intensity})
+
+
+@pytest.fixture(scope="module")
+def model():
+    return fit_surrogate(healthy_table(), doe_table(), modes=MODES, bootstrap=20)
+
+
+def draw(model, intensities, n_units=400, seed=0):
+    rng = np.random.default_rng(seed)
+    out = [model.draw_unit(rng, intensities) for _ in range(n_units)]
+    return np.stack([v for v, _ in out]), np.stack([k for _, k in out])
+
+
+def test_indicator_columns_are_those_with_a_valid_companion():
+    assert indicator_columns(healthy_table(n_units=2, n_flights=2)) == tuple(NAMES)
+
+
+def test_healthy_draws_keep_the_joint_structure(model):
+    values, valid = draw(model, np.zeros((10, 2)))
+    assert model.names == tuple(NAMES) and values.shape == (400, 10, 5)
+    complete = valid.all(axis=2)
+    v = values[complete]
+    # the exact relation of the physics holds on every drawn flight (no variance across it)
+    np.testing.assert_allclose(v[:, 2], 0.5 * (v[:, 0] + v[:, 1]), atol=1e-9)
+    # flight-to-flight spread: the tiny direction stays tiny, the others keep their size
+    within = np.nanmean(np.where(valid, values, np.nan).var(axis=1, ddof=1), axis=0)
+    np.testing.assert_allclose(within[[0, 1]], [1.44, 0.36], rtol=0.15)
+    assert within[3] < 1e-5
+    # unit share of the variance
+    share = model.unit_share
+    np.testing.assert_allclose(share[[0, 1, 4]], [4 / 5.44, 1 / 1.36, 9 / 9.01], atol=0.12)
+    # invalid indicator pattern: D invalid on about 10 % of the flights, the others never
+    rate = 1.0 - valid.mean(axis=(0, 1))
+    assert 0.06 < rate[3] < 0.14 and rate[[0, 1, 2, 4]].max() == 0.0
+    assert (values[~valid] == 0.0).all()
+
+
+def test_describe_reports_estimation_error(model):
+    d = model.describe()
+    assert list(d.index) == NAMES
+    assert (d.loc[["A", "B", "EXT"], "std_se"] > 0).all()
+    assert (d["std_se"] < d["std"]).all()
+    assert model.fit_info["healthy_units"] == 60 and model.fit_info["doe_units"] == 5
+
+
+def test_degraded_response_is_curved_with_unit_spread(model):
+    f = np.zeros((10, 2))
+    f[:, 0] = np.linspace(0.0, 1.0, 10)
+    healthy, _ = draw(model, np.zeros((10, 2)), seed=3)
+    degraded, _ = draw(model, f, seed=3)  # same seed: same units, same residuals
+    delta = (degraded - healthy)[:, :, 0]
+    gains = np.arange(5) + 2.0
+    # at the DOE knots the mean response is the mean of the units' gain * f**2 (not a line through 0)
+    knots = {0.5: 0.25, 1.0: 1.0}
+    for fi, sq in knots.items():
+        k = int(np.argmin(np.abs(f[:, 0] - fi)))
+        if np.isclose(f[k, 0], fi):
+            np.testing.assert_allclose(delta[:, k].mean(), gains.mean() * sq, rtol=0.1)
+    assert delta[:, -1].std() > 1.0  # unit-to-unit spread (gains 2..6)
+    assert set(np.round(delta[:, -1], 6)) <= set(np.round(gains, 6))
+    # Inb-like relation survives the degradation
+    np.testing.assert_allclose(degraded[:, :, 2], 0.5 * (degraded[:, :, 0] + degraded[:, :, 1]), atol=1e-9)
+
+
+def test_degradation_invalidates_and_simultaneous_modes_add(model):
+    f = np.zeros((4, 2))
+    f[:, 1] = [0.0, 0.5, 1.0, 1.0]
+    f[3, 0] = 1.0
+    healthy, _ = draw(model, np.zeros((4, 2)), seed=5)
+    degraded, valid = draw(model, f, seed=5)
+    assert valid[:, :2, 1].all() and not valid[:, 2:, 1].any()  # m2 at full intensity: B invalid, as in the DOE
+    d = degraded - healthy
+    ok = valid[:, 2, 3] & valid[:, 3, 3]
+    np.testing.assert_allclose(d[ok, 2, 3], 4.0, rtol=1e-9)
+    np.testing.assert_allclose(d[ok, 3, 3], 4.0, rtol=1e-9)  # m1 does not move D; m2 still does
+    only_m1 = f.copy()
+    only_m1[:, 1] = 0.0
+    single_m1 = draw(model, only_m1, seed=5)[0][:, 3, 0] - healthy[:, 3, 0]
+    np.testing.assert_allclose(d[:, 3, 0], single_m1 + 1.0, rtol=1e-9)  # responses add
+
+
+def test_draws_are_deterministic_and_extrapolate_the_last_segment(model):
+    a = draw(model, np.full((3, 2), 0.3), n_units=3, seed=9)
+    b = draw(model, np.full((3, 2), 0.3), n_units=3, seed=9)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    healthy, _ = draw(model, np.zeros((1, 2)), n_units=50, seed=2)
+    beyond, _ = draw(model, np.array([[1.5, 0.0]]), n_units=50, seed=2)
+    gains = np.arange(5) + 2.0
+    # last segment (0.5 -> 1.0) continued: gain * (1 + 1.5 * (1.5 - 1.0))
+    assert set(np.round(beyond[:, 0, 0] - healthy[:, 0, 0], 6)) <= set(np.round(gains * 1.75, 6))
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda h, d: (h.drop(columns=["unit_id"]), d), r"'healthy' table .* lacks the column\(s\) \['unit_id'\]"),
+    (lambda h, d: (h, d.drop(columns=["mode"])), r"'doe' table .* lacks the column\(s\) \['mode'\]"),
+    (lambda h, d: (h, d.drop(columns=["EXT"])), r"lacks the indicator column\(s\) \['EXT'\]"),
+    (lambda h, d: (h[[c for c in h.columns if not c.endswith("_valid")]], d), r"no indicator column"),
+    (lambda h, d: (h.drop_duplicates("unit_id"), d), r"at least one unit with two flights"),
+    (lambda h, d: ("table.csv", d), r"must be a pandas DataFrame"),
+])
+def test_bad_tables_raise_clear_errors(mutate, message):
+    h, d = mutate(healthy_table(n_units=4, n_flights=3), doe_table(n_units=2))
+    with pytest.raises(DataFormatError, match=message):
+        fit_surrogate(h, d, modes=MODES)
+
+
+def test_model_validates_its_arrays(model):
+    with pytest.raises(DataFormatError, match="'mean' parameter of SurrogateModel"):
+        SurrogateModel(names=model.names, modes=model.modes, mean=np.zeros(3), unit_factor=model.unit_factor,
+                       residuals=model.residuals, residual_valid=model.residual_valid, knots=model.knots,
+                       responses=model.responses, response_invalid=model.response_invalid)
+
+
+@pytest.mark.slow  # about 230 two-minute physics flights
+def test_surrogate_healthy_flights_sit_where_physics_flights_do(tmp_path):
+    """Under the covariance of physics healthy flights, surrogate healthy flights are as far from the mean
+    as fresh physics flights (the old Gaussian surrogate's median distance was 3.7 times the physics')."""
+    from fuelhm_bench.envs.cache import surrogate_knowledge, training_indicators
+    from fuelhm_bench.envs import KnowledgeSize
+    from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+    size = KnowledgeSize(doe_units=1, doe_intensities=(1.0,), healthy_units=2, healthy_flights=6,
+                         surrogate_units=16, surrogate_flights=6, surrogate_doe_units=1,
+                         surrogate_doe_intensities=(1.0,))
+    knowledge = surrogate_knowledge("paper_2012", flight_minutes=2.0, size=size, cache_dir=tmp_path)
+    model = SurrogateModel.from_knowledge(knowledge)
+    physics = training_indicators("paper_2012", flight_minutes=2.0, units=16, flights=6, cache_dir=tmp_path)
+    x = physics[list(INDICATOR_NAMES)].to_numpy(dtype=float)
+    x = x[np.isfinite(x).all(axis=1)]
+    mean, cov = x.mean(axis=0), np.cov(x, rowvar=False)
+    inv = np.linalg.pinv(cov, rcond=1e-10)
+    rng = np.random.default_rng(0)
+    cols = [model.names.index(n) for n in INDICATOR_NAMES]
+    draws = [model.draw_unit(rng, np.zeros((6, 7))) for _ in range(200)]
+    s = np.concatenate([v[k.all(axis=1)][:, cols] for v, k in draws])
+
+    def median_distance(rows):
+        d = rows - mean
+        return float(np.median(np.sqrt(np.einsum("ij,jk,ik->i", d, inv, d))))
+
+    ratio = median_distance(s) / median_distance(x)
+    # physics flights are in-sample for their own covariance (biased low), so the ratio sits a little above 1
+    assert 0.8 <= ratio <= 1.6, ratio

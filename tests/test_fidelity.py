@@ -1,0 +1,82 @@
+"""The fidelity check (:mod:`fuelhm_bench.fidelity`, ``fuelhm-bench fidelity``).
+
+Default run: a shrunk scenario (3 units x 8 flights of 2 minutes, ``KnowledgeSize.small()``) with three
+methods at both fidelities, and the command's argument errors. ``-m slow``: the full reference panel on
+``paper_2012`` at full size against the targets.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import kendalltau
+
+from baselines.gaussian_full import FullGaussianMethod
+from baselines.paper_mahalanobis import PaperMahalanobis
+from baselines.trivial import NullMethod
+from fuelhm_bench.cli import main
+from fuelhm_bench.envs import KnowledgeSize
+from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.fidelity import PANEL, TARGETS, fidelity_check
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    from conftest import _tiny_scenario
+
+    path = _tiny_scenario(tmp_path_factory.mktemp("scenario"), name="tiny_fidelity")
+    methods = {"null": NullMethod(), "paper": PaperMahalanobis(cv=None), "full": FullGaussianMethod(cv=2)}
+    return fidelity_check(path, methods=methods, flight_minutes=2.0, knowledge_size=KnowledgeSize.small(),
+                          cache_dir=tmp_path_factory.mktemp("cache"), timeout_s=120)
+
+
+def test_report_compares_the_same_methods_at_both_fidelities(report):
+    m = report.methods.set_index("method")
+    assert list(m.index) == ["null", "paper", "full"]
+    assert (m[["status_physics", "status_surrogate"]] == "ok").all().all()
+    assert m.loc["null", "summary_physics"] == 0.0 and m.loc["null", "summary_surrogate"] == 0.0
+    np.testing.assert_allclose(m["summary_diff"], m["summary_surrogate"] - m["summary_physics"])
+    tau = kendalltau(m["summary_physics"], m["summary_surrogate"]).statistic
+    assert report.kendall_tau == pytest.approx(tau, nan_ok=True)
+    assert set(report.modes["method"]) <= {"null", "paper", "full"}
+    assert {"detection_diff", "fcr_diff"} <= set(report.modes.columns)
+    assert set(report.seconds) == {"physics", "surrogate"}
+
+
+def test_failures_name_every_missed_target(report):
+    assert report.passed == (not report.failures)
+    line = report.summary()
+    assert line["verdict"] == ("pass" if report.passed else f"FAIL ({len(report.failures)})")
+
+
+def test_targets_are_those_of_the_benchmark():
+    assert TARGETS == {"kendall_tau": 0.8, "summary_points": 5.0, "fcr": 0.05}
+    assert {"full-gaussian", "gaussian-mixture", "one-class-svm", "nearest-neighbour",
+            "paper-mahalanobis", "isolation-forest", "itl-classifier", "null", "random"} == set(PANEL)
+
+
+def test_report_writes_tables_markdown_and_figure(report, tmp_path):
+    paths = report.write(tmp_path / "out")
+    assert [p.name for p in paths] == ["methods.csv", "modes.csv", "report.md", "fidelity.png"]
+    assert all(p.stat().st_size > 0 for p in paths)
+    text = (tmp_path / "out" / "report.md").read_text()
+    assert "Kendall tau" in text and "## Verdict" in text
+
+
+def test_a_panel_needs_two_methods():
+    with pytest.raises(ParameterError, match="at least two named methods"):
+        fidelity_check("paper_2012", methods={"null": NullMethod()})
+
+
+def test_cli_rejects_a_single_method(tmp_path, capsys):
+    code = main(["fidelity", "--scenario", "paper_2012", "--method", "baselines.trivial:NullMethod",
+                 "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert "--method must be given at least twice" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_paper_2012_meets_the_targets(tmp_path):
+    """The full reference panel on paper_2012 at full size (several minutes of simulation the first time)."""
+    report = fidelity_check("paper_2012")
+    assert report.passed, report.failures
