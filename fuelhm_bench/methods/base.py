@@ -52,8 +52,8 @@ class BaseMethod(abc.ABC):
     * ``needs_raw`` (bool, default False): the method works on the raw
       full-rate flight samples. It then receives the raw healthy training
       flights in ``fit(raw_flights=...)`` and the current flight's samples with
-      each decision (see ``docs/methods.md``, "Raw-signal methods"; the
-      harness wiring is listed there).
+      each decision, ``decide(row, raw=...)``, its hook being ``_decide(row, raw)``
+      (the input is :class:`fuelhm_bench.methods.raw.RawFlight`).
 
     The public ``fit``, ``start_unit`` and ``decide`` wrap them with input
     checks, seeding and output validation.
@@ -179,9 +179,10 @@ class BaseMethod(abc.ABC):
             docs/methods.md). Not modified.
         knowledge : Knowledge or None, default=None
             Published knowledge (ITL, signatures, maximal intensities).
-        raw_flights : object, default=None
-            Raw flight samples of the same healthy flights, for methods that
-            work on samples (DATA.md long format), or None.
+        raw_flights : iterable of RawFlight or None, default=None
+            Raw full-rate samples of the same healthy flights
+            (:class:`fuelhm_bench.methods.raw.RawFlight`, one at a time); required
+            by a method with ``needs_raw = True``, None otherwise.
         random_state : int, numpy.random.Generator or None, default=None
             Seed. When None, the ``random_state`` hyperparameter is used if the
             method has one; when both are None a fresh OS seed is drawn (the
@@ -205,6 +206,9 @@ class BaseMethod(abc.ABC):
         self._stream_unit = None
         self._stream_last_index = None
         self.is_fitted_ = False
+        if type(self).needs_raw and raw_flights is None:
+            raise MethodError(f"{type(self).__name__} needs the raw healthy training flights "
+                              f"(needs_raw = True): pass raw_flights, an iterable of RawFlight.")
         self._fit(healthy_indicators, knowledge=knowledge, raw_flights=raw_flights, rng=self.rng_)
         self.is_fitted_ = True
         return self
@@ -234,7 +238,7 @@ class BaseMethod(abc.ABC):
         """Reset the per-unit history (subclass hook; default: nothing to reset)."""
         return None
 
-    def decide(self, observation_row: pd.Series | Mapping) -> Decision:
+    def decide(self, observation_row: pd.Series | Mapping, *, raw: Any = None) -> Decision:
         """Decide for the next flight of the current unit.
 
         Parameters
@@ -243,6 +247,10 @@ class BaseMethod(abc.ABC):
             One row of the indicator table (indicators, ``<name>_valid``,
             ``n_points``, ``quality_reason``, ``flight_id``, ``unit_id``,
             ``flight_index``). Flights must come in increasing ``flight_index``.
+        raw : RawFlight or None, default=None
+            The flight's full-rate samples (:class:`fuelhm_bench.methods.raw.RawFlight`);
+            required by, and only passed to, a method with ``needs_raw = True``,
+            whose hook is then ``_decide(row, raw)``.
 
         Returns
         -------
@@ -272,7 +280,13 @@ class BaseMethod(abc.ABC):
                                       f".decide must come in increasing flight_index order. Got "
                                       f"flight {k} after flight {self._stream_last_index} instead.")
             self._stream_last_index = k
-        decision = self._decide(row)
+        if type(self).needs_raw:
+            if raw is None:
+                raise MethodError(f"{type(self).__name__} needs the raw flight (needs_raw = True): "
+                                  f"call decide(row, raw=RawFlight).")
+            decision = self._decide(row, raw)
+        else:
+            decision = self._decide(row)
         return _raise_if_invalid(decision, type(self).__name__, f"for unit {self._stream_unit!r}")
 
     @abc.abstractmethod
