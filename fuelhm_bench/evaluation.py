@@ -263,7 +263,8 @@ def scenario_data(scenario, *, seed: int | None = None, doe_units: int = 6, scal
     if not drifted:
         test_cfg = dataclasses.replace(test_cfg, nominal=sc.truth_model())
     if scale != 1.0:
-        test_cfg = dataclasses.replace(test_cfg, n_units=max(1, int(round(test_cfg.n_units * scale))))
+        from fuelhm_bench.flights.scale import scaled_unit_count  # every mode stays represented
+        test_cfg = dataclasses.replace(test_cfg, n_units=scaled_unit_count(test_cfg, scale))
     # The published knowledge (healthy spread for the signatures, ITL) comes from the benchmark's own
     # simulations of the published model, whatever the amount of data the methods are given.
     build = KnowledgeBuild.from_scenario(sc, doe_units=doe_units, seed=train_cfg.seed)

@@ -98,6 +98,7 @@ def evaluate_method(spec: str, method, evaluation, out: Path, *, method_seed: in
     outcome.episodes.to_csv(mdir / "episodes.csv", index=False)
     kpis = headline_kpis(card)
     kpis["cost_kusd"] = outcome.cost_kusd
+    kpis.update(_statistics(card, mdir, spec))
     if evaluation.nominal is not None:  # robustness: same method, same fleet without the drift
         nom = run_in_env(method, evaluation.nominal, random_state=method_seed, timeout_s=timeout_s)
         if nom.ok:
@@ -111,6 +112,23 @@ def evaluate_method(spec: str, method, evaluation, out: Path, *, method_seed: in
     entry["kpis"] = {k: (None if v != v else float(v)) for k, v in kpis.items()}
     log(f"{spec}: ok in {outcome.seconds:.1f} s; " + ", ".join(f"{k}={v:.3g}" for k, v in kpis.items() if v == v))
     return entry
+
+
+def _statistics(card, mdir: Path, spec: str) -> dict:
+    """Unit-bootstrap intervals and guilt calibration of a scored run (files + KPI columns)."""
+    from fuelhm_bench.scoring import save_figure
+    from fuelhm_bench.scoring.bootstrap import scorecard_intervals
+    from fuelhm_bench.scoring.calibration import guilt_calibration, plot_reliability
+
+    ci = scorecard_intervals(card, n_resamples=1000)
+    ci.to_csv(mdir / "headline_intervals.csv", index=False)
+    cal = guilt_calibration(card.flights)
+    cal["reliability"].to_csv(mdir / "reliability.csv", index=False)
+    save_figure(plot_reliability({spec: cal["reliability"]}), mdir / "reliability.png")
+    out = {"brier": cal["brier"], "ece": cal["ece"]}
+    for _, row in ci.iterrows():
+        out[f"{row['kpi']}_ci_low"], out[f"{row['kpi']}_ci_high"] = row["ci_low"], row["ci_high"]
+    return out
 
 
 def summary_table(summary: list[dict]) -> pd.DataFrame:
@@ -244,10 +262,20 @@ def run_leaderboard(config: LeaderboardConfig, out: Path, *, progress_factory=No
                                     {"seed": seed, "fidelity": evaluation.fidelity,
                                      "seconds": round(time.perf_counter() - t0, 1)})
             for e in summary:
+                files = {"report": f"{sdir.name}/report.md"}
+                files.update({name: f"{sdir.name}/{slug(e['method'])}/{f}" for name, f in (
+                    ("detection", "table_v_detection.md"), ("scores", "score_distributions.png"),
+                    ("reliability", "reliability.png"), ("intervals", "headline_intervals.csv"))})
                 rows.append({"scenario": sc.id, "seed": seed if seed is not None else sc.seeds.master,
                              "fidelity": evaluation.fidelity, "method": e["method"], "status": e["status"],
-                             **(e.get("kpis") or {})})
+                             "params": ", ".join(f"{k}={v}" for k, v in sorted((e.get("params") or {}).items())),
+                             "message": (e.get("message") or "").strip().splitlines()[0] if e.get("message")
+                             else "", "links": files, **(e.get("kpis") or {})})
     board = pd.DataFrame(rows)
+    from fuelhm_bench.leaderboard_page import write_leaderboard_page
+
+    write_leaderboard_page(board, out)  # index.html: a view of the same rows
+    board = board.drop(columns=["links"], errors="ignore")
     if "summary_score" in board:
         board = board.sort_values(["scenario", "summary_score"], ascending=[True, False], na_position="last")
     board.to_csv(out / "leaderboard.csv", index=False)

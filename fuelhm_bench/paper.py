@@ -79,7 +79,8 @@ def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3
     train_cfg = sc.training_fleet_config()
     test_cfg = sc.test_fleet_config()
     if scale != 1.0:  # only the scored fleet shrinks: the healthy model needs the unit-to-unit dispersion
-        test_cfg = dataclasses.replace(test_cfg, n_units=max(2, int(round(test_cfg.n_units * scale))))
+        from fuelhm_bench.flights.scale import scaled_unit_count  # every mode stays represented
+        test_cfg = dataclasses.replace(test_cfg, n_units=scaled_unit_count(test_cfg, scale, minimum=2))
     stage("knowledge: healthy training fleet, design of experiments, ITL, signatures")
     build = KnowledgeBuild.from_scenario(sc, doe_units=doe_units, seed=train_cfg.seed)
     build = dataclasses.replace(build, healthy_fleet=train_cfg)

@@ -238,7 +238,8 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
     knowledge = published_knowledge(sc, size=size, **common)
     fit_part, cal_part = _split_training(training_indicators(sc, **common))
-    n_units = max(1, int(round(sc.fleet.units * scale)))
+    from fuelhm_bench.flights.scale import scaled_unit_count  # every mode of the fleet stays represented
+    n_units = scaled_unit_count(sc.test_fleet_config(), scale)
     scored = sc if n_units == sc.fleet.units else dataclasses.replace(
         sc, fleet=dataclasses.replace(sc.fleet, units=n_units))  # products above are keyed on the unscaled one
 

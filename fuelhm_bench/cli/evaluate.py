@@ -31,7 +31,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenario's master seed")
     p.add_argument("--method-seed", type=non_negative_int, default=0, help="random_state passed to fit")
     p.add_argument("--timeout", type=positive_float, default=600.0, help="time limit per method [s]")
-    p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of test units")
+    p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of test units (extended until every mode of the fleet is represented)")
     p.add_argument("--minutes", type=positive_float, default=None,
                    help="override the flight duration [min] (quick looks; >= engine start + 1 min)")
     p.add_argument("--cache-dir", default=None,

@@ -35,5 +35,5 @@ def run(args: argparse.Namespace) -> int:
     board = run_leaderboard(config, out, progress_factory=progress_bar, cache_dir=args.cache_dir)
     cols = [c for c in ("scenario", "method", "status", "summary_score") if c in board]
     print(board[cols].to_string(index=False))
-    print(f"wrote {out / 'leaderboard.md'}")
+    print(f"wrote {out / 'leaderboard.md'} and {out / 'index.html'}")
     return 0

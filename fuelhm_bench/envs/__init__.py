@@ -41,11 +41,15 @@ SurrogateModel, fit_surrogate, surrogate_doe
 
 from __future__ import annotations
 
-from gymnasium.envs.registration import register, registry
+from gymnasium.envs.registration import WrapperSpec, register, registry
 
-__all__ = ["ENV_IDS", "ActuationLoopEnv", "KnowledgeSize", "SurrogateModel", "clear_memory_cache",
+__all__ = ["ENV_IDS", "MAX_EPISODE_STEPS", "ActuationLoopEnv", "KnowledgeSize", "SurrogateModel", "clear_memory_cache",
            "default_cache_dir", "published_knowledge", "register_envs", "scored_indicators",
            "fit_surrogate", "surrogate_doe", "surrogate_healthy", "surrogate_knowledge", "training_indicators"]
+
+#: ``spec.max_episode_steps`` of every id: flights in a unit's life beyond which a ``TimeLimit``
+#: truncates (above every shipped scenario's ``flights_per_unit``, at most 60).
+MAX_EPISODE_STEPS: int = 1000
 
 #: Registered environment ids -> entry points (``"module:Class"``, imported on ``make``).
 ENV_IDS: dict[str, str] = {
@@ -72,9 +76,14 @@ def register_envs() -> None:
     """Register every id of :data:`ENV_IDS` (idempotent; already registered ids are left alone)."""
     for env_id, entry_point in ENV_IDS.items():
         if env_id not in registry:
-            # The episode length is the scenario's flights_per_unit: the environment
-            # terminates itself, so no TimeLimit (max_episode_steps) is registered.
-            register(id=env_id, entry_point=entry_point, nondeterministic=False)
+            # The episode length is the scenario's flights_per_unit (the environment terminates
+            # itself); MAX_EPISODE_STEPS bounds it for RL libraries, and KeepEpisodeTruth (outside
+            # the TimeLimit) keeps info["episode_truth"] when a shorter limit truncates.
+            register(id=env_id, entry_point=entry_point, nondeterministic=False,
+                     max_episode_steps=MAX_EPISODE_STEPS,
+                     additional_wrappers=(WrapperSpec("KeepEpisodeTruth",
+                                                      "fuelhm_bench.envs.wrappers:KeepEpisodeTruth",
+                                                      {}),))
 
 
 def __getattr__(name: str):

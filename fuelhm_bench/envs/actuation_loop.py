@@ -626,17 +626,36 @@ class ActuationLoopEnv(gym.Env):
         if self.surrogate is not None and t + 1 < self.n_flights:
             self._fill_surrogate(t + 1, self._intensity[t + 1:] * self._mask(self._active))
 
+    def episode_truth(self) -> dict:
+        """Ground truth of the flights of the current episode decided so far.
+
+        What ``info["episode_truth"]`` holds at the end of an episode, for the
+        first ``k`` flights when called after ``k`` steps (e.g. after a
+        ``TimeLimit`` truncation, see :class:`fuelhm_bench.envs.wrappers.KeepEpisodeTruth`).
+
+        Raises
+        ------
+        ResetNeeded
+            Before the first ``reset``.
+        """
+        if not hasattr(self, "_cost_log"):
+            from gymnasium.error import ResetNeeded
+
+            raise ResetNeeded("Call reset before episode_truth.")
+        return self._episode_truth()
+
     def _episode_truth(self) -> dict:
-        n = self.n_flights
-        active = np.array(self._active_log, dtype=np.int64)[:, None]
-        flown = self._intensity * ((active & _BITS) != 0)
+        n = len(self._cost_log)
+        active = np.array(self._active_log[:n], dtype=np.int64).reshape(n, 1)
+        flown = self._intensity[:n] * ((active & _BITS) != 0)
         return {
             "unit_id": self._unit_id,
             "flight_index": np.arange(n, dtype=np.int64),
             "intensity": flown,
             "max_intensity": self._max.copy(),
             "onset": self._onset.copy(),
-            "detectable": np.array([bool(d & a) for d, a in zip(self._det_bits, self._active_log)]),
+            "detectable": np.array([bool(d & a) for d, a in zip(self._det_bits[:n], self._active_log[:n])],
+                                   dtype=bool),
             "failure": np.array([f != 0 for f in self._fail_log]),
             "repaired": np.array([r != 0 for r in self._repair_log]),
             "cost_kusd": np.array(self._cost_log, dtype=np.float64),

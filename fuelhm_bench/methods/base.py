@@ -20,14 +20,14 @@ import numpy as np
 import pandas as pd
 
 from fuelhm_bench.errors import DataFormatError, MethodError, ParameterError
-from fuelhm_bench.methods.decision import Decision, _raise_if_invalid
+from fuelhm_bench.methods.decision import GUILT_SUM_TOLERANCE, Decision, _raise_if_invalid
 from fuelhm_bench.methods.knowledge import Knowledge
 from fuelhm_bench.methods.params import validate_params
 from fuelhm_bench.methods.tables import (DECISION_COLUMNS, GUILT_COLUMNS,
                                          check_indicator_table, empty_decisions)
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["BaseMethod", "clone_method", "run_table", "run_unit"]
+__all__ = ["BaseMethod", "clone_method", "has_batch_path", "run_table", "run_unit"]
 
 
 class BaseMethod(abc.ABC):
@@ -42,7 +42,18 @@ class BaseMethod(abc.ABC):
       healthy flights only;
     * ``_decide(row) -> Decision``: decide for one flight, using only the
       current row and the per-unit history the method keeps itself;
-    * optionally ``_start_unit(unit_id)``: reset that per-unit history.
+    * optionally ``_start_unit(unit_id)``: reset that per-unit history;
+    * optionally ``_decide_batch(rows) -> (score, alarm, guilt)``: the batch
+      decision path of a method **without per-unit state**, see
+      :meth:`decide_batch`.
+
+    Declarations (class attributes):
+
+    * ``needs_raw`` (bool, default False): the method works on the raw
+      full-rate flight samples. It then receives the raw healthy training
+      flights in ``fit(raw_flights=...)`` and the current flight's samples with
+      each decision, ``decide(row, raw=...)``, its hook being ``_decide(row, raw)``
+      (the input is :class:`fuelhm_bench.methods.raw.RawFlight`).
 
     The public ``fit``, ``start_unit`` and ``decide`` wrap them with input
     checks, seeding and output validation.
@@ -82,6 +93,15 @@ class BaseMethod(abc.ABC):
 
     #: Declared hyperparameter constraints, see :mod:`fuelhm_bench.methods.params`.
     _parameter_constraints: ClassVar[dict[str, tuple]] = {}
+
+    #: True for a method that needs the raw full-rate flight samples (see the class docstring).
+    needs_raw: ClassVar[bool] = False
+
+    #: Batch decision hook of a method without per-unit state (None: no batch path).
+    #: ``_decide_batch(rows: DataFrame) -> (score (n,), alarm (n,), guilt (n, 7))``: every row
+    #: must be decided on its own (no per-unit history, no randomness), exactly as ``_decide``
+    #: would decide it; ``check_method`` verifies that both paths agree.
+    _decide_batch: ClassVar[Any] = None
 
     # ------------------------------------------------------------------ params
     @classmethod
@@ -159,9 +179,10 @@ class BaseMethod(abc.ABC):
             docs/methods.md). Not modified.
         knowledge : Knowledge or None, default=None
             Published knowledge (ITL, signatures, maximal intensities).
-        raw_flights : object, default=None
-            Raw flight samples of the same healthy flights, for methods that
-            work on samples (the long format of docs/data-format.md), or None.
+        raw_flights : iterable of RawFlight or None, default=None
+            Raw full-rate samples of the same healthy flights
+            (:class:`fuelhm_bench.methods.raw.RawFlight`, one at a time); required
+            by a method with ``needs_raw = True``, None otherwise.
         random_state : int, numpy.random.Generator or None, default=None
             Seed. When None, the ``random_state`` hyperparameter is used if the
             method has one; when both are None a fresh OS seed is drawn (the
@@ -185,6 +206,9 @@ class BaseMethod(abc.ABC):
         self._stream_unit = None
         self._stream_last_index = None
         self.is_fitted_ = False
+        if type(self).needs_raw and raw_flights is None:
+            raise MethodError(f"{type(self).__name__} needs the raw healthy training flights "
+                              f"(needs_raw = True): pass raw_flights, an iterable of RawFlight.")
         self._fit(healthy_indicators, knowledge=knowledge, raw_flights=raw_flights, rng=self.rng_)
         self.is_fitted_ = True
         return self
@@ -214,7 +238,7 @@ class BaseMethod(abc.ABC):
         """Reset the per-unit history (subclass hook; default: nothing to reset)."""
         return None
 
-    def decide(self, observation_row: pd.Series | Mapping) -> Decision:
+    def decide(self, observation_row: pd.Series | Mapping, *, raw: Any = None) -> Decision:
         """Decide for the next flight of the current unit.
 
         Parameters
@@ -223,6 +247,10 @@ class BaseMethod(abc.ABC):
             One row of the indicator table (indicators, ``<name>_valid``,
             ``n_points``, ``quality_reason``, ``flight_id``, ``unit_id``,
             ``flight_index``). Flights must come in increasing ``flight_index``.
+        raw : RawFlight or None, default=None
+            The flight's full-rate samples (:class:`fuelhm_bench.methods.raw.RawFlight`);
+            required by, and only passed to, a method with ``needs_raw = True``,
+            whose hook is then ``_decide(row, raw)``.
 
         Returns
         -------
@@ -252,15 +280,67 @@ class BaseMethod(abc.ABC):
                                       f".decide must come in increasing flight_index order. Got "
                                       f"flight {k} after flight {self._stream_last_index} instead.")
             self._stream_last_index = k
-        decision = self._decide(row)
+        if type(self).needs_raw:
+            if raw is None:
+                raise MethodError(f"{type(self).__name__} needs the raw flight (needs_raw = True): "
+                                  f"call decide(row, raw=RawFlight).")
+            decision = self._decide(row, raw)
+        else:
+            decision = self._decide(row)
         return _raise_if_invalid(decision, type(self).__name__, f"for unit {self._stream_unit!r}")
 
     @abc.abstractmethod
     def _decide(self, row: pd.Series) -> Decision:
         """Decide for one flight (subclass hook)."""
 
+    def decide_batch(self, rows: pd.DataFrame) -> pd.DataFrame:
+        """Decide for many flights at once (methods without per-unit state only).
+
+        Only available when the class defines ``_decide_batch``
+        (:func:`has_batch_path`). Each row is decided on its own, so the result
+        equals ``decide`` called row by row; the harness
+        (:func:`run_table`) shows a batch at most one flight per unit, all at
+        the same position in their units' lives, so no batch holds a flight
+        later than one not yet decided.
+
+        Parameters
+        ----------
+        rows : pandas.DataFrame
+            Indicator rows (``unit_id``, ``flight_index`` and the indicators).
+            Not modified.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Decisions (:data:`DECISION_COLUMNS`), one per row, in the input order.
+
+        Raises
+        ------
+        MethodError
+            When the method has no batch path, is not fitted, or returns
+            invalid decisions (the first bad flight is named).
+        """
+        name = type(self).__name__
+        if not has_batch_path(self):
+            raise MethodError(f"{name} has no batch decision path (it does not define "
+                              f"_decide_batch); use start_unit and decide.")
+        self._check_fitted("decide_batch")
+        check_indicator_table(rows, name="rows", owner=f"{name}.decide_batch",
+                              keys=("unit_id", "flight_index"))
+        out = self._decide_batch(rows)
+        return _batch_frame(rows, out, name)
+
     def decide_unit(self, unit_table: pd.DataFrame) -> pd.DataFrame:
-        """Decide for every flight of one unit, causally (see :func:`run_unit`)."""
+        """Decide for every flight of one unit, causally (see :func:`run_unit`).
+
+        A method with a batch path (:func:`has_batch_path`) decides the whole
+        unit in one :meth:`decide_batch` call (its rows are independent).
+        """
+        if has_batch_path(self):
+            check_indicator_table(unit_table, name="unit_table", owner="decide_unit",
+                                  keys=("unit_id", "flight_index"))
+            ordered = unit_table.sort_values("flight_index", kind="stable")
+            return self.decide_batch(ordered).reset_index(drop=True)
         return run_unit(self, unit_table)
 
     def decide_table(self, indicators: pd.DataFrame) -> pd.DataFrame:
@@ -331,8 +411,78 @@ def run_unit(method: Any, unit_table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out, columns=list(DECISION_COLUMNS))
 
 
+def has_batch_path(method: Any) -> bool:
+    """True when ``method`` declares a batch decision path (defines ``_decide_batch``).
+
+    Such a method keeps no per-unit state: :func:`run_table` then decides
+    in batches instead of row by row.
+    """
+    return callable(getattr(type(method), "_decide_batch", None))
+
+
+def _batch_frame(rows: pd.DataFrame, out: Any, name: str) -> pd.DataFrame:
+    """Validate what ``_decide_batch`` returned and build the decisions table."""
+    n = len(rows)
+    try:
+        score, alarm, guilt = out
+        score = np.asarray(score, dtype=np.float64).reshape(-1)
+        alarm = np.asarray(alarm)
+        guilt = np.asarray(guilt, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise MethodError(f"{name}._decide_batch must return (score, alarm, guilt) arrays. Got "
+                          f"{type(out).__name__} instead ({exc}).") from None
+    if score.shape != (n,) or alarm.shape != (n,) or guilt.shape != (n, len(MODE_IDS)):
+        raise MethodError(f"{name}._decide_batch must return shapes ({n},), ({n},) and "
+                          f"({n}, {len(MODE_IDS)}) for {n} rows. Got {score.shape}, "
+                          f"{alarm.shape} and {guilt.shape} instead.")
+    if alarm.dtype != bool:
+        raise MethodError(f"{name}._decide_batch must return a bool alarm array. Got dtype "
+                          f"{alarm.dtype} instead.")
+    total = guilt.sum(axis=1) if n else np.zeros(0)
+    bad_guilt = (~np.isfinite(guilt) | (guilt < 0)).any(axis=1)
+    bad_guilt |= alarm & (np.abs(total - 1.0) > GUILT_SUM_TOLERANCE)
+    bad_guilt |= ~alarm & (total != 0.0) & (np.abs(total - 1.0) > GUILT_SUM_TOLERANCE)
+    for bad, what in ((~np.isfinite(score), "a non-finite score"),
+                      (bad_guilt, "an invalid guilt (>= 0, summing to 1 on an alarm, 0 or 1 "
+                                  "otherwise)")):
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise MethodError(f"{name} returned an invalid decision for unit "
+                              f"{rows['unit_id'].iloc[i]!r}, flight "
+                              f"{rows['flight_index'].iloc[i]}: {what}.")
+    data = {"unit_id": rows["unit_id"].to_numpy(),
+            "flight_index": rows["flight_index"].to_numpy(dtype=np.int64),
+            "score": score, "alarm": alarm.astype(bool)}
+    data.update({c: guilt[:, j] for j, c in enumerate(GUILT_COLUMNS)})
+    return pd.DataFrame(data, columns=list(DECISION_COLUMNS))
+
+
+def _run_table_batch(method: Any, indicators: pd.DataFrame) -> pd.DataFrame:
+    """Batch decisions in causal waves: wave ``k`` holds the ``k``-th flight of every unit."""
+    units = indicators["unit_id"]
+    if indicators[["unit_id", "flight_index"]].duplicated().any():
+        raise DataFormatError("The 'indicators' parameter of run_table must have unique "
+                              "(unit_id, flight_index) pairs.")
+    order = indicators.assign(_unit=pd.factorize(units, use_na_sentinel=False)[0]).sort_values(
+        ["_unit", "flight_index"], kind="stable")
+    wave = order.groupby("_unit", sort=False).cumcount().to_numpy()
+    ordered = order.drop(columns="_unit")
+    parts = []
+    for k in range(int(wave.max()) + 1):
+        parts.append(method.decide_batch(ordered[wave == k]).set_axis(
+            ordered.index[wave == k]))
+    out = pd.concat(parts).loc[ordered.index]
+    return out.reset_index(drop=True)
+
+
 def run_table(method: Any, indicators: pd.DataFrame) -> pd.DataFrame:
     """Run a fitted method on every unit of an indicator table (:func:`run_unit` per unit).
+
+    A method with a batch path (:func:`has_batch_path`, no per-unit state) is
+    run by :meth:`BaseMethod.decide_batch` in causal waves instead: wave ``k``
+    holds the ``k``-th flight (in ``flight_index`` order) of every unit, so no
+    batch shows a flight later than one still to be decided. The result is
+    the same table.
 
     Parameters
     ----------
@@ -349,6 +499,8 @@ def run_table(method: Any, indicators: pd.DataFrame) -> pd.DataFrame:
     """
     check_indicator_table(indicators, name="indicators", owner="run_table",
                           keys=("unit_id", "flight_index"))
+    if has_batch_path(method):
+        return _run_table_batch(method, indicators)
     parts = [run_unit(method, group)
              for _, group in indicators.groupby("unit_id", sort=False, dropna=False)]
     if not parts:

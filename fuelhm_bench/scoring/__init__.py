@@ -15,6 +15,12 @@ wilson_interval, bootstrap_ratio_interval, rates_with_intervals
 error_rate_changes, drift_sweep_table, degradation_summary
     Robustness: FPR and FNR changes under drift, over a sweep, and the drift at which a method
     degrades by a stated amount (the sweep itself: :mod:`fuelhm_bench.drift_sweep`).
+kpi_intervals, scorecard_intervals (scoring.bootstrap)
+    Unit-bootstrap intervals of the headline KPIs and the summary score.
+mean_ranks, friedman_test, critical_difference, wilcoxon_holm, cd_diagram (scoring.ranking)
+    Aggregate over scenarios and seeds (Demsar 2006).
+brier_score, reliability_table, guilt_calibration, plot_reliability (scoring.calibration)
+    Calibration of guilt probabilities.
 robustness, robustness_table
     Nominal vs drifted runs: every headline KPI, and one KPI's ratio.
 perfect_decisions, null_decisions
@@ -27,6 +33,9 @@ to_markdown, to_latex, write_tables, plot_score_distributions, save_figure
 See docs/scoring.md for every definition with worked examples.
 """
 
+from fuelhm_bench.scoring.bootstrap import INTERVAL_KPIS, kpi_intervals, scorecard_intervals
+from fuelhm_bench.scoring.calibration import (brier_score, guilt_calibration, plot_reliability,
+                                              reliability_table)
 from fuelhm_bench.scoring.config import ScoringConfig
 from fuelhm_bench.scoring.cost import maintenance_cost, total_cost
 from fuelhm_bench.scoring.delay import delay_summary, detection_delays
@@ -46,6 +55,8 @@ from fuelhm_bench.scoring.robustness import (
     robustness,
     robustness_table,
 )
+from fuelhm_bench.scoring.ranking import (cd_diagram, critical_difference, friedman_test,
+                                          mean_ranks, rank_matrix, wilcoxon_holm)
 from fuelhm_bench.scoring.run import (HEALTHY, LABEL_COLUMNS, MULTIPLE, NO_ALARM, TIE, Run,
                                       flight_table)
 from fuelhm_bench.scoring.scorecard import HEADLINE_KPIS, Scorecard, headline_kpis, score_run
@@ -53,6 +64,9 @@ from fuelhm_bench.scoring.summary import summary_components, summary_score
 from fuelhm_bench.scoring.thresholds import HealthyScoreModel, fit_healthy_model, threshold_table
 
 __all__ = [
+    "INTERVAL_KPIS", "brier_score", "cd_diagram", "critical_difference", "friedman_test",
+    "guilt_calibration", "kpi_intervals", "mean_ranks", "plot_reliability", "rank_matrix",
+    "reliability_table", "scorecard_intervals", "wilcoxon_holm",
     "ALL_MODES", "HEADLINE_KPIS", "HEALTHY", "HealthyScoreModel", "LABEL_COLUMNS", "METHOD_ALARM",
     "MULTIPLE", "NO_ALARM", "Run", "Scorecard", "ScoringConfig", "TIE", "bootstrap_ratio_interval",
     "classification_table", "confusion_matrix", "delay_summary", "detection_by_band",

@@ -1,0 +1,42 @@
+"""``fuelhm-bench score``: score an externally produced decisions file against a scenario."""
+
+from __future__ import annotations
+
+import argparse
+
+from fuelhm_bench.cli.export import add_scenario_options, scenario_kwargs
+
+
+def register(sub) -> None:
+    p = sub.add_parser("score", help="score a decisions file (CSV or Parquet) produced outside this package",
+                       description="Score the decisions of a method written in any language on the flights of "
+                                   "'fuelhm-bench export' (use the same scenario options). The file has one row per "
+                                   "flight: split (test or calibration), unit_id, flight_index, score, alarm and "
+                                   "optionally guilt_<mode>; see docs/scoring.md, 'External methods'.")
+    p.add_argument("decisions", help="decisions file (.csv or .parquet)")
+    add_scenario_options(p)
+    p.add_argument("--out", default=None, help="also write the KPI tables into this directory")
+    p.add_argument("--force", action="store_true", help="overwrite existing table files")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fuelhm_bench.exchange import score_decisions
+    from fuelhm_bench.scoring import headline_kpis
+    from fuelhm_bench.scoring.bootstrap import scorecard_intervals
+
+    card = score_decisions(args.decisions, args.scenario, **scenario_kwargs(args))
+    ci = scorecard_intervals(card).set_index("kpi")
+    for kpi, value in headline_kpis(card).items():
+        extra = (f"  [{ci.loc[kpi, 'ci_low']:.4g}, {ci.loc[kpi, 'ci_high']:.4g}]"
+                 if kpi in ci.index and ci.loc[kpi, "ci_low"] == ci.loc[kpi, "ci_low"] else "")
+        print(f"{kpi:28s} {value:.4g}{extra}")
+    if args.out:
+        from fuelhm_bench.cli._common import check_output_dir
+        from fuelhm_bench.scoring import write_tables
+
+        out = check_output_dir(args.out)
+        tables = {**card.tables(), "headline_intervals": ci.reset_index()}
+        write_tables(tables, out, overwrite=args.force)
+        print(f"tables: {out}")
+    return 0

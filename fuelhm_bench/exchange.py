@@ -1,0 +1,365 @@
+"""Data in and out: export a scenario's tables, score an externally produced decisions file.
+
+``fuelhm-bench export`` writes what a method written in another language or
+framework needs; ``fuelhm-bench score`` scores the decisions it produced (as
+NAB scores detection files). The file formats are in docs/scoring.md
+("External methods"). Both read the scenario through :func:`scenario_tables`,
+the one place that asks the simulation cache.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+
+from fuelhm_bench.errors import DataFormatError, ParameterError
+from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
+from fuelhm_bench.scoring.run import LABEL_COLUMNS
+from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+
+__all__ = ["DECISION_FILE_COLUMNS", "export_scenario", "read_decisions", "scenario_tables",
+           "score_decisions"]
+
+#: Required columns of a decisions file (``guilt_<mode>`` are optional: zeros when absent).
+DECISION_FILE_COLUMNS: tuple[str, ...] = ("split", "unit_id", "flight_index", "score", "alarm")
+
+_SPLITS = ("test", "calibration")
+_TRUE = {"1", "true", "True", "TRUE", "1.0"}
+_FALSE = {"0", "false", "False", "FALSE", "0.0"}
+
+
+@dataclasses.dataclass(frozen=True)
+class ScenarioTables:
+    """A scenario's tables as a method and the scorer see them.
+
+    Attributes
+    ----------
+    training : pandas.DataFrame
+        Healthy training indicators with ``split`` = ``"fit"`` or ``"calibration"``
+        (held-out units whose scores set the thresholds ``mu + A sigma``).
+    test : pandas.DataFrame
+        Indicators of the scored fleet (``unit_id``, ``flight_index``, ...).
+    labels : pandas.DataFrame
+        Ground truth of the scored flights (``LABEL_COLUMNS``).
+    scenario : Scenario
+        The scenario (seed and scale applied).
+    """
+
+    training: pd.DataFrame
+    test: pd.DataFrame
+    labels: pd.DataFrame
+    scenario: Any
+
+
+def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None = None,
+                    scale: float = 1.0, flight_minutes: float | None = None,
+                    cache_dir=None, progress: Callable[[int], object] | None = None
+                    ) -> ScenarioTables:
+    """Training, test and label tables of a scenario, from the simulation cache.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+    fidelity : {"physics", "surrogate"} or None, default=None
+        Of the scored flights (the training flights are always physics); None:
+        the scenario's.
+    seed : int or None, default=None
+        Overrides the scenario's master seed.
+    scale : float, default=1.0
+        Fraction of the scored units (every mode kept, see ``--scale``).
+    flight_minutes : float or None, default=None
+    cache_dir : path-like, False or None, default=None
+    progress : callable, optional
+
+    Returns
+    -------
+    ScenarioTables
+    """
+    from fuelhm_bench.envs.cache import resolve_scenario, scored_indicators, training_indicators
+    from fuelhm_bench.flights.fleet import build_units
+    from fuelhm_bench.flights.scale import scaled_unit_count
+    from fuelhm_bench.runner import _split_training
+
+    sc = resolve_scenario(scenario)
+    if seed is not None:
+        sc = dataclasses.replace(sc, seeds=dataclasses.replace(sc.seeds, master=int(seed),
+                                                               training=None, test=None))
+    fidelity = sc.fidelity if fidelity is None else fidelity
+    if fidelity not in ("physics", "surrogate"):
+        raise ParameterError(f"The 'fidelity' parameter of scenario_tables must be 'physics', "
+                             f"'surrogate' or None. Got {fidelity!r} instead.")
+    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
+    fit_part, cal_part = _split_training(training_indicators(sc, **common))
+    training = pd.concat([fit_part.assign(split="fit"), cal_part.assign(split="calibration")],
+                         ignore_index=True)
+    config = sc.test_fleet_config()
+    n_units = scaled_unit_count(config, scale)
+    if fidelity == "physics":
+        test = scored_indicators(sc, units=n_units, **common)
+        config = dataclasses.replace(config, n_units=n_units)
+        labels = _schedule_labels(config, build_units(config))
+    else:
+        test, labels = _surrogate_tables(sc, n_units, flight_minutes, cache_dir)
+    sc = dataclasses.replace(sc, fleet=dataclasses.replace(sc.fleet, units=n_units))
+    return ScenarioTables(training, test, labels, sc)
+
+
+def _schedule_labels(config, units) -> pd.DataFrame:
+    """Labels of a fleet flown without maintenance, from its drawn schedules (no simulation)."""
+    rows = []
+    for unit in units:
+        for k in range(config.n_flights):
+            it = unit.schedule.intensities(k)
+            row = {"unit_id": unit.unit_id, "flight_index": k}
+            for m in MODE_IDS:
+                row[f"intensity_{m}"] = float(it.get(m, 0.0))
+                row[f"max_intensity_{m}"] = unit.schedule.max_intensity_of(m)
+                row[f"onset_{m}"] = unit.schedule.onset_of(m)
+            rows.append(row)
+    return pd.DataFrame(rows, columns=list(LABEL_COLUMNS))
+
+
+def _surrogate_tables(sc, n_units, flight_minutes, cache_dir) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Scored fleet of the surrogate fidelity: the environment's observations, maintenance off."""
+    from fuelhm_bench.envs.actuation_loop import ActuationLoopEnv
+
+    env = ActuationLoopEnv(scenario=sc, fidelity="surrogate", maintenance=False,
+                           flight_minutes=flight_minutes, cache_dir=cache_dir)
+    none = {"alarm": 0, "guilt": np.zeros(len(MODE_IDS), dtype=np.float32)}
+    ind_rows, lab_parts = [], []
+    for k in range(n_units):
+        obs, _ = env.reset(options={"unit": k})
+        for f in range(env.n_flights):
+            valid = np.asarray(obs["valid"]).astype(bool)
+            values = np.where(valid, np.asarray(obs["indicators"], dtype=float), np.nan)
+            row = {"flight_id": k * env.n_flights + f, "unit_id": k, "flight_index": f}
+            row.update(dict(zip(INDICATOR_NAMES, values)))
+            row.update({f"{n}_valid": bool(v) for n, v in zip(INDICATOR_NAMES, valid)})
+            ind_rows.append(row)
+            obs, _, terminated, _, info = env.step(none)
+        truth = info["episode_truth"]
+        lab = {"unit_id": np.full(env.n_flights, k), "flight_index": truth["flight_index"]}
+        for j, m in enumerate(MODE_IDS):
+            lab[f"intensity_{m}"] = truth["intensity"][:, j]
+            lab[f"max_intensity_{m}"] = truth["max_intensity"][j]
+            lab[f"onset_{m}"] = truth["onset"][j]
+        lab_parts.append(pd.DataFrame(lab, columns=list(LABEL_COLUMNS)))
+    return pd.DataFrame(ind_rows), pd.concat(lab_parts, ignore_index=True)
+
+
+def _write(frame: pd.DataFrame, path: Path, force: bool) -> Path:
+    if path.exists() and not force:
+        from fuelhm_bench.errors import OutputPathError
+
+        raise OutputPathError(f"{path} exists; refusing to overwrite it (pass --force).")
+    frame.to_parquet(path, index=False)
+    return path
+
+
+def export_scenario(scenario, out_dir, *, raw: bool = False, force: bool = False,
+                    **kwargs) -> dict[str, Path]:
+    """Write a scenario's tables as Parquet files into ``out_dir``.
+
+    Files: ``training.parquet`` (healthy training indicators, ``split`` =
+    fit / calibration), ``test.parquet`` (scored indicators), ``labels.parquet``
+    (ground truth of the scored flights: never show it to the method) and, with
+    ``raw``, ``raw_training.parquet`` and ``raw_test.parquet`` (full-rate
+    samples: ``unit_id, flight_index, time_s, current_mA, position_mm,
+    demand_mm, n2_pct``... written one batch of flights at a time).
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+    out_dir : path-like
+        Created if needed; existing files are not overwritten without ``force``.
+    raw : bool, default=False
+        Also write the raw flights (physics fidelity only; simulated again).
+    force : bool, default=False
+    **kwargs
+        ``fidelity, seed, scale, flight_minutes, cache_dir, progress`` of
+        :func:`scenario_tables`.
+
+    Returns
+    -------
+    dict of str to Path
+    """
+    out = Path(out_dir)
+    names = ["training", "test", "labels"] + (["raw_training", "raw_test"] if raw else [])
+    clash = [n for n in names if (out / f"{n}.parquet").exists()]
+    if clash and not force:
+        from fuelhm_bench.errors import OutputPathError
+
+        raise OutputPathError(f"{out / (clash[0] + '.parquet')} exists; refusing to overwrite it "
+                              f"(pass --force).")
+    if raw and kwargs.get("fidelity") == "surrogate":
+        raise ParameterError("The '--raw' option of export needs the physics fidelity: the "
+                             "surrogate draws indicators, not flights. Got --fidelity surrogate.")
+    tables = scenario_tables(scenario, **kwargs)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"training": _write(tables.training, out / "training.parquet", True),
+             "test": _write(tables.test, out / "test.parquet", True),
+             "labels": _write(tables.labels, out / "labels.parquet", True)}
+    if raw:
+        sc = tables.scenario
+        minutes = kwargs.get("flight_minutes")
+        for name, config in (("raw_training", sc.training_fleet_config()),
+                             ("raw_test", sc.test_fleet_config())):
+            if minutes is not None:
+                config = dataclasses.replace(config, mission=dataclasses.replace(
+                    config.mission, duration_s=60.0 * float(minutes)))
+            paths[name] = _write_raw(config, out / f"{name}.parquet", kwargs.get("progress"))
+    return paths
+
+
+def _write_raw(config, path: Path, progress) -> Path:
+    """Full-rate flights of a fleet, one batch at a time (bounded memory)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from fuelhm_bench.flights.fleet import flights_frame, iter_flights
+
+    writer = None
+    try:
+        for batch in iter_flights(config, progress=progress):
+            frame = flights_frame(batch)
+            index = {f.flight_id: f.flight_index for f in batch}
+            frame.insert(2, "flight_index", frame["flight_id"].map(index).astype(np.int64))
+            if "phase" in frame.columns:
+                frame["phase"] = frame["phase"].astype(str)
+            table = pa.Table.from_pandas(frame, preserve_index=False)
+            if writer is None:
+                writer = pq.ParquetWriter(path, table.schema)
+            writer.write_table(table)
+    finally:
+        if writer is not None:
+            writer.close()
+    return path
+
+
+# --------------------------------------------------------------------------- decisions
+def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
+    """Read and validate a decisions file (CSV or Parquet).
+
+    Returns
+    -------
+    decisions : pandas.DataFrame
+        The ``test`` rows as a decisions table (:data:`DECISION_COLUMNS`).
+    healthy_scores : numpy.ndarray
+        Scores of the ``calibration`` rows.
+
+    Raises
+    ------
+    DataFormatError
+        Naming the file, the column and the first bad row (1-based line of a CSV).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataFormatError(f"{path}: no such decisions file.")
+    try:
+        frame = (pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq")
+                 else pd.read_csv(path, dtype={"split": str, "alarm": str}, keep_default_na=False,
+                                  na_values=[""]))
+    except Exception as exc:  # noqa: BLE001 - any reader failure is a format error of that file
+        raise DataFormatError(f"{path}: cannot be read as CSV or Parquet ({exc}).") from None
+    line = (lambda i: f"line {i + 2}") if path.suffix.lower() not in (".parquet", ".pq") \
+        else (lambda i: f"row {i}")
+    missing = [c for c in DECISION_FILE_COLUMNS if c not in frame.columns]
+    if missing:
+        raise DataFormatError(f"{path}: the decisions file must have the columns "
+                              f"{list(DECISION_FILE_COLUMNS)} (and optionally guilt_<mode>). "
+                              f"Missing {missing}.")
+    unknown = [c for c in frame.columns if c not in DECISION_FILE_COLUMNS and c not in GUILT_COLUMNS]
+    if unknown:
+        raise DataFormatError(f"{path}: unknown column(s) {unknown}; allowed: "
+                              f"{list(DECISION_FILE_COLUMNS) + list(GUILT_COLUMNS)}.")
+    split = frame["split"].astype(str).str.strip()
+    bad = ~split.isin(_SPLITS)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataFormatError(f"{path}, {line(i)}: column 'split' must be 'test' or "
+                              f"'calibration'. Got {frame['split'].iloc[i]!r} instead.")
+    for col in ("flight_index", "score"):
+        values = pd.to_numeric(frame[col], errors="coerce")
+        bad = ~np.isfinite(values.to_numpy(dtype=float))
+        if col == "flight_index":
+            bad |= (values.fillna(-1) < 0).to_numpy() | (values.fillna(0) % 1 != 0).to_numpy()
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            what = "an integer >= 0" if col == "flight_index" else "a finite number"
+            raise DataFormatError(f"{path}, {line(i)}: column {col!r} must be {what}. Got "
+                                  f"{frame[col].iloc[i]!r} instead.")
+        frame[col] = values.astype(np.int64 if col == "flight_index" else np.float64)
+    alarm_text = frame["alarm"].astype(str).str.strip()
+    bad = ~alarm_text.isin(_TRUE | _FALSE)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataFormatError(f"{path}, {line(i)}: column 'alarm' must be 0/1 or true/false. Got "
+                              f"{frame['alarm'].iloc[i]!r} instead.")
+    frame["alarm"] = alarm_text.isin(_TRUE)
+    for col in GUILT_COLUMNS:
+        if col not in frame.columns:
+            frame[col] = 0.0
+        blank = frame[col].isna().to_numpy()  # an empty cell is 0 (e.g. on calibration rows)
+        values = pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=float)
+        values = np.where(blank, 0.0, values)
+        bad = ~np.isfinite(values) | (values < 0) | (values > 1 + 1e-6)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise DataFormatError(f"{path}, {line(i)}: column {col!r} must be a number in [0, 1]. "
+                                  f"Got {frame[col].iloc[i]!r} instead.")
+        frame[col] = values
+    unit = frame["unit_id"]
+    numeric = pd.to_numeric(unit, errors="coerce")
+    frame["unit_id"] = numeric.astype(np.int64) if numeric.notna().all() and (
+        numeric % 1 == 0).all() else unit.astype(str)
+    test = frame[split == "test"].reset_index(drop=True)
+    healthy = frame.loc[split == "calibration", "score"].to_numpy(dtype=float)
+    if len(healthy) < 2:
+        raise DataFormatError(f"{path}: the decisions file must hold the scores of at least 2 "
+                              f"'calibration' flights (the held-out healthy training units of "
+                              f"training.parquet); they set the thresholds mu + A sigma. Got "
+                              f"{len(healthy)} instead.")
+    guilt = test[list(GUILT_COLUMNS)].to_numpy(dtype=float)
+    no_guilt = test["alarm"].to_numpy() & (guilt.sum(axis=1) == 0)
+    guilt[no_guilt] = 1.0 / len(MODE_IDS)  # an alarm without a diagnosis: uniform guilt
+    test[list(GUILT_COLUMNS)] = guilt
+    return test[list(DECISION_COLUMNS)], healthy
+
+
+def score_decisions(path, scenario, *, config=None, **kwargs):
+    """Score a decisions file against a scenario's labels.
+
+    Parameters
+    ----------
+    path : path-like
+        Decisions file (docs/scoring.md, "External methods").
+    scenario : str, Path or Scenario
+    config : ScoringConfig or None, default=None
+    **kwargs
+        ``fidelity, seed, scale, flight_minutes, cache_dir`` of :func:`scenario_tables`
+        (the same as at export).
+
+    Returns
+    -------
+    Scorecard
+
+    Raises
+    ------
+    DataFormatError
+        Naming the file, for an invalid file or flights that do not match the scenario's.
+    """
+    from fuelhm_bench.scoring import Run, score_run
+
+    decisions, healthy = read_decisions(path)
+    labels = scenario_tables(scenario, **kwargs).labels
+    if decisions["unit_id"].dtype != labels["unit_id"].dtype:
+        decisions["unit_id"] = decisions["unit_id"].astype(labels["unit_id"].dtype, errors="ignore")
+    try:
+        run = Run(labels=labels, decisions=decisions, healthy_scores=healthy, name=Path(path).stem)
+    except DataFormatError as exc:
+        raise DataFormatError(f"{path}: {exc}") from None
+    return score_run(run, config)

@@ -1,0 +1,95 @@
+"""export / score: the round trip, and a decisions file validated with clear errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fuelhm_bench.cli import main
+from fuelhm_bench.errors import DataFormatError, OutputPathError
+from fuelhm_bench.exchange import export_scenario, read_decisions, score_decisions
+from fuelhm_bench.methods import GUILT_COLUMNS
+from fuelhm_bench.scoring import perfect_decisions
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    from conftest import _tiny_scenario
+
+    root = tmp_path_factory.mktemp("exchange")
+    scenario = _tiny_scenario(root)
+    out = root / "export"
+    assert main(["export", "--scenario", str(scenario), "--minutes", "2", "--raw",
+                 "--out", str(out)]) == 0
+    return scenario, out
+
+
+def _perfect_file(out, path):
+    labels = pd.read_parquet(out / "labels.parquet")
+    training = pd.read_parquet(out / "training.parquet")
+    test = perfect_decisions(labels).assign(split="test")
+    cal = training.loc[training["split"] == "calibration", ["unit_id", "flight_index"]]
+    cal = cal.assign(split="calibration", score=np.linspace(0.0, 1.0, len(cal)), alarm=False)
+    pd.concat([test, cal], ignore_index=True).to_csv(path, index=False)
+    return path
+
+
+def test_export_writes_every_table(exported):
+    _, out = exported
+    training = pd.read_parquet(out / "training.parquet")
+    test = pd.read_parquet(out / "test.parquet")
+    labels = pd.read_parquet(out / "labels.parquet")
+    assert set(training["split"]) == {"fit", "calibration"}
+    assert len(test) == len(labels) == 24 and {"flight_index", "unit_id", "X1"} <= set(test.columns)
+    assert test[["unit_id", "flight_index"]].equals(labels[["unit_id", "flight_index"]])
+    raw = pd.read_parquet(out / "raw_test.parquet", columns=["unit_id", "flight_index", "time_s"])
+    assert raw.groupby(["unit_id", "flight_index"]).ngroups == 24
+    per_flight = raw.groupby(["unit_id", "flight_index"]).size()
+    assert per_flight.min() > 1000  # full rate, not resampled
+
+
+def test_round_trip_perfect_method_scores_100(exported, tmp_path, capsys):
+    scenario, out = exported
+    path = _perfect_file(out, tmp_path / "perfect.csv")
+    card = score_decisions(path, scenario, flight_minutes=2.0)
+    assert card.summary_score == 100.0
+    assert main(["score", str(path), "--scenario", str(scenario), "--minutes", "2",
+                 "--out", str(tmp_path / "tables")]) == 0
+    printed = capsys.readouterr().out
+    assert "summary_score" in printed and "100" in printed
+    assert (tmp_path / "tables" / "headline_intervals.csv").exists()
+
+
+def test_export_refuses_to_overwrite(exported):
+    scenario, out = exported
+    with pytest.raises(OutputPathError, match="training.parquet exists"):
+        export_scenario(scenario, out, flight_minutes=2.0)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d.drop(columns="score"), r"must have the columns .* Missing \['score'\]"),
+    (lambda d: d.assign(extra=1), r"unknown column\(s\) \['extra'\]"),
+    (lambda d: d.assign(split=["tset"] + list(d["split"][1:])), r"line 2: column 'split' must be"),
+    (lambda d: d.assign(alarm=["maybe"] + list(d["alarm"][1:])), r"line 2: column 'alarm' must be"),
+    (lambda d: d.assign(score=["nan"] + list(d["score"][1:])), r"line 2: column 'score' must be a finite"),
+    (lambda d: d.assign(flight_index=[1.5] + list(d["flight_index"][1:])), r"'flight_index' must be an integer"),
+    (lambda d: d.assign(**{GUILT_COLUMNS[0]: [2.0] + [0.0] * (len(d) - 1)}), r"must be a number in \[0, 1\]"),
+    (lambda d: d[d["split"] == "test"], r"at least 2 'calibration' flights"),
+    (lambda d: d.iloc[1:], r"must cover the same flights"),
+])
+def test_bad_decisions_file_is_named(exported, tmp_path, edit, match):
+    scenario, out = exported
+    good = pd.read_csv(_perfect_file(out, tmp_path / "good.csv"))
+    bad = tmp_path / "bad.csv"
+    edit(good).to_csv(bad, index=False)
+    with pytest.raises(DataFormatError, match=match) as err:
+        score_decisions(bad, scenario, flight_minutes=2.0)
+    assert "bad.csv" in str(err.value)
+
+
+def test_missing_file_and_cli_error(tmp_path, capsys):
+    with pytest.raises(DataFormatError, match="no such decisions file"):
+        read_decisions(tmp_path / "none.csv")
+    assert main(["score", str(tmp_path / "none.csv"), "--scenario", "paper_2012"]) == 2
+    assert "no such decisions file" in capsys.readouterr().err
