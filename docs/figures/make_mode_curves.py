@@ -26,17 +26,18 @@ from fuelhm_bench.taxonomy import MODE_IDS  # noqa: E402
 def main(out: Path) -> Path:
     sweep = VelocityGainSweep(ramp_duration_s=30.0)
     base = LoopModel().with_parameters({"lvdt.noise_std_m": 0.0})
-    fig, axes = plt.subplots(2, 4, figsize=(13, 6.2), sharex=True, sharey=True, layout="constrained")
+    fig, axes = plt.subplots(2, 4, figsize=(13, 6.2), layout="constrained")
     for ax, mode in zip(axes.flat, MODE_IDS):
         for f, colour in ((0.0, "0.6"), (0.5, "tab:blue"), (1.0, "tab:red")):
             r = run_sweep(base.degraded({mode: f}) if f else base, sweep)
             ax.plot(1e3 * r.current_a, 1e3 * r.velocity_m_s, color=colour, lw=0.8, label=f"{100 * f:.0f} %")
         ax.set_title(mode, fontsize=9)
+        ax.set_xlim(-12.5, 12.5)
+        ax.set_ylim(-85.0, 95.0)
         ax.grid(alpha=0.3)
     # last panel: zoom on the null region, every mode at 100 % (grey: healthy)
     ax = axes.flat[-1]
-    zoom = fig.add_axes(ax.get_position())
-    ax.axis("off")
+    zoom = ax
     r0 = run_sweep(base, sweep)
     zoom.plot(1e3 * r0.current_a, 1e3 * r0.velocity_m_s, color="0.6", lw=1.5)
     for mode in MODE_IDS:
@@ -50,12 +51,18 @@ def main(out: Path) -> Path:
     zoom.legend(fontsize=5.5, loc="upper left")
     for ax in axes[-1][:-1]:
         ax.set_xlabel("current [mA]")
+    zoom.set_ylabel("rod velocity [mm/s]")
     for ax in axes[:, 0]:
         ax.set_ylabel("rod velocity [mm/s]")
     axes.flat[0].legend(fontsize=8, loc="upper left")
     fig.suptitle("Velocity-gain curve (open-loop sweep, 82 % N2) of each mode at 0 / 50 / 100 %", fontsize=10)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=70)
+    # Keep the committed file small: a palette image.
+    from PIL import Image
+
+    with Image.open(out) as img:
+        img.convert("RGB").quantize(colors=256).save(out, optimize=True)
     return out
 
 
