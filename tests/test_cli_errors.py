@@ -44,7 +44,7 @@ def run(capsys, *argv) -> tuple[int, str]:
     (["simulate", "--degrade", "internal_leakage"], "error: --degrade 'internal_leakage': expected MODE:INTENSITY"),
     (["simulate", "--degrade", "internal_leakage:abc"],
      "error: --degrade 'internal_leakage:abc': the intensity must be a number in [0, 1]. Got 'abc' instead."),
-    (["simulate", "--degrade", "internal_leakage:2"], "the intensity must be a number in [0, 1]. Got '2' instead."),
+    (["simulate", "--degrade", "internal_leakage:2"], "the intensity must be a number in [0, 1]. Got 2 instead."),
     (["simulate", "--degrade", "internal_leakge:0.5"], "Did you mean 'internal_leakage'?"),
     (["simulate", "--units", "10000", "--flights", "10000"],
      "error: --units 10000 x --flights 10000 x --minutes 60 is 1e+08 flight-hours"),
