@@ -123,7 +123,7 @@ def _interrupt(tmp_path: Path, delay_s: float) -> tuple[int, str, list[str]]:
 
 def test_ctrl_c_exits_130_with_one_line_and_no_output(tmp_path):
     """SIGINT during the simulation (imports done, numba kernels running): exit 130, one line, no file."""
-    code, err, files = _interrupt(tmp_path, delay_s=12.0)
+    code, err, files = _interrupt(tmp_path, delay_s=8.0)
     assert code == 130, err
     assert err.strip() == "fuelhm-bench: interrupted (Ctrl-C); no partial output was published."
     assert files == []
