@@ -58,7 +58,7 @@ def _is_interrupt(exc: BaseException) -> bool:
     return False
 
 
-_INTERRUPTED = {"seen": False}
+_INTERRUPTED = {"seen": False, "done": False}
 
 
 def _on_sigint(signum, frame) -> None:  # pragma: no cover - exercised by a subprocess test
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         previous = signal.signal(signal.SIGINT, _on_sigint)
     else:  # pragma: no cover - signals can only be handled in the main thread
         previous = None
-    _INTERRUPTED["seen"] = False
+    _INTERRUPTED.update(seen=False, done=False)
     try:
         return _run(argv)
     except KeyboardInterrupt:
@@ -92,11 +92,19 @@ def main(argv: list[str] | None = None) -> int:
             return _interrupted()
         raise
     finally:
-        if previous is not None:
+        if previous is not None and not _INTERRUPTED["done"]:
             signal.signal(signal.SIGINT, previous)
 
 
 def _interrupted() -> int:
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        # Handled: a late or repeated SIGINT (e.g. re-raised by a native library's handler) must not
+        # turn the clean exit 130 into a death by signal.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _INTERRUPTED["done"] = True
     print("fuelhm-bench: interrupted (Ctrl-C); no partial output was published.", file=sys.stderr)
     return 130
 
@@ -118,5 +126,23 @@ def _run(argv: list[str] | None) -> int:
         return 2
 
 
+def console_main() -> None:  # pragma: no cover - the console script; tested through a subprocess
+    """The ``fuelhm-bench`` console script: :func:`main`, then exit with its status.
+
+    After a Ctrl-C the process ends at once with status 130 (streams flushed,
+    outputs already discarded): interpreter finalization would restore the
+    default SIGINT action, and a late second SIGINT (some native libraries
+    re-raise the signal) would then kill the process instead of exiting 130.
+    """
+    import os
+
+    code = main()
+    if code == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    console_main()

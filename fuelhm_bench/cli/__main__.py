@@ -1,5 +1,3 @@
-import sys
+from fuelhm_bench.cli import console_main
 
-from fuelhm_bench.cli import main
-
-sys.exit(main())
+console_main()

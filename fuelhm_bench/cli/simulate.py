@@ -75,7 +75,8 @@ def parse_degrade(spec: str) -> tuple[str, float]:
     except ValueError:
         f = float("nan")
     if not 0.0 <= f <= 1.0:
-        raise ParameterError(f"--degrade '{spec}': the intensity must be a number in [0, 1]. Got '{value}' instead.")
+        shown = value if f == f else f"'{value}'"  # a number as typed, anything else quoted
+        raise ParameterError(f"--degrade '{spec}': the intensity must be a number in [0, 1]. Got {shown} instead.")
     try:
         clean = validate_intensities({mode.strip(): f}, where="--degrade")
     except UnknownNameError as exc:
