@@ -17,10 +17,6 @@ ROOT = Path(__file__).resolve().parents[1]
 FORBIDDEN = re.compile("|".join([r"\bPHYSICS" + r"\.md\b", r"\bDATA" + r"\.md\b", r"\.\./" + "shared",
                                  "/work/" + "shared"]))
 
-#: Folders whose references are being replaced on another branch (issue 9 section 2, physics side);
-#: remove this list once that branch is merged.
-PENDING: tuple[str, ...] = ("fuelhm_bench/physics", "fuelhm_bench/flights", "fuelhm_bench/indicators")
-
 _TEXT_SUFFIXES = {".py", ".md", ".yaml", ".yml", ".toml", ".txt", ".cfg", ".ini", ".json", ".html", ".rst"}
 _SKIP_DIRS = {".git", ".venv", "venv", "build", "dist", "__pycache__", ".pytest_cache", "node_modules",
               ".benchmarks", "out"}
@@ -48,8 +44,6 @@ def test_no_file_cites_a_document_outside_the_repository():
     offenders = []
     for path in _project_files():
         rel = path.relative_to(ROOT).as_posix()
-        if rel.startswith(PENDING):
-            continue
         for number, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
             if FORBIDDEN.search(line):
                 offenders.append(f"{rel}:{number}: {line.strip()[:100]}")
