@@ -57,8 +57,8 @@ class ScenarioTables:
 
 def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None = None,
                     scale: float = 1.0, flight_minutes: float | None = None,
-                    cache_dir=None, progress: Callable[[int], object] | None = None
-                    ) -> ScenarioTables:
+                    cache_dir=None, progress: Callable[[int], object] | None = None,
+                    knowledge_size=None) -> ScenarioTables:
     """Training, test and label tables of a scenario, from the simulation cache.
 
     Parameters
@@ -74,6 +74,8 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
     flight_minutes : float or None, default=None
     cache_dir : path-like, False or None, default=None
     progress : callable, optional
+    knowledge_size : KnowledgeSize, dict or None, default=None
+        Size of the surrogate's knowledge build (surrogate fidelity only).
 
     Returns
     -------
@@ -103,7 +105,7 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
         config = dataclasses.replace(config, n_units=n_units)
         labels = _schedule_labels(config, build_units(config))
     else:
-        test, labels = _surrogate_tables(sc, n_units, flight_minutes, cache_dir)
+        test, labels = _surrogate_tables(sc, n_units, flight_minutes, cache_dir, knowledge_size)
     sc = dataclasses.replace(sc, fleet=dataclasses.replace(sc.fleet, units=n_units))
     return ScenarioTables(training, test, labels, sc)
 
@@ -123,12 +125,14 @@ def _schedule_labels(config, units) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(LABEL_COLUMNS))
 
 
-def _surrogate_tables(sc, n_units, flight_minutes, cache_dir) -> tuple[pd.DataFrame, pd.DataFrame]:
+def _surrogate_tables(sc, n_units, flight_minutes, cache_dir,
+                      knowledge_size) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Scored fleet of the surrogate fidelity: the environment's observations, maintenance off."""
     from fuelhm_bench.envs.actuation_loop import ActuationLoopEnv
 
     env = ActuationLoopEnv(scenario=sc, fidelity="surrogate", maintenance=False,
-                           flight_minutes=flight_minutes, cache_dir=cache_dir)
+                           flight_minutes=flight_minutes, cache_dir=cache_dir,
+                           knowledge_size=knowledge_size)
     none = {"alarm": 0, "guilt": np.zeros(len(MODE_IDS), dtype=np.float32)}
     ind_rows, lab_parts = [], []
     for k in range(n_units):

@@ -98,7 +98,8 @@ def evaluate_method(spec: str, method, evaluation, out: Path, *, method_seed: in
     outcome.episodes.to_csv(mdir / "episodes.csv", index=False)
     kpis = headline_kpis(card)
     kpis["cost_kusd"] = outcome.cost_kusd
-    kpis.update(_statistics(card, mdir, spec))
+    for name, value in _statistics(card, mdir, spec).items():  # (Series.update ignores new keys)
+        kpis[name] = value
     if evaluation.nominal is not None:  # robustness: same method, same fleet without the drift
         nom = run_in_env(method, evaluation.nominal, random_state=method_seed, timeout_s=timeout_s)
         if nom.ok:
@@ -279,9 +280,11 @@ def run_leaderboard(config: LeaderboardConfig, out: Path, *, progress_factory=No
     if "summary_score" in board:
         board = board.sort_values(["scenario", "summary_score"], ascending=[True, False], na_position="last")
     board.to_csv(out / "leaderboard.csv", index=False)
-    cols = [c for c in ("scenario", "seed", "method", "status", "summary_score", "fpr_standard_thr",
-                        "fnr_standard_thr", "fcr", "delay_censored_mean", "cost_kusd", "robustness",
-                        "robustness_delta_fpr", "robustness_delta_fnr") if c in board]
+    cols = [c for c in ("scenario", "seed", "method", "params", "status", "summary_score",
+                        "summary_score_ci_low", "summary_score_ci_high", "fpr_standard_thr",
+                        "fnr_standard_thr", "fcr", "brier", "delay_censored_mean", "cost_kusd", "robustness",
+                        "robustness_delta_fpr", "robustness_delta_fnr")
+            if c in board]
     (out / "leaderboard.md").write_text("# Leaderboard\n\nRanked by summary score (null method = 0, perfect = 100; "
                                         "docs/scoring.md).\n\n" + to_markdown(board[cols].round(3)) + "\n")
     return board

@@ -93,3 +93,18 @@ def test_missing_file_and_cli_error(tmp_path, capsys):
         read_decisions(tmp_path / "none.csv")
     assert main(["score", str(tmp_path / "none.csv"), "--scenario", "paper_2012"]) == 2
     assert "no such decisions file" in capsys.readouterr().err
+
+
+@pytest.mark.slow  # builds the surrogate's (small) knowledge
+def test_round_trip_surrogate_fidelity(tmp_path):
+    from conftest import _tiny_scenario
+
+    from fuelhm_bench.envs import KnowledgeSize
+
+    scenario = _tiny_scenario(tmp_path)
+    kw = {"fidelity": "surrogate", "flight_minutes": 2.0, "knowledge_size": KnowledgeSize.small()}
+    export_scenario(scenario, tmp_path / "out", **kw)
+    test = pd.read_parquet(tmp_path / "out" / "test.parquet")
+    assert len(test) == 24 and np.isfinite(test["X1"]).all()
+    path = _perfect_file(tmp_path / "out", tmp_path / "perfect.csv")
+    assert score_decisions(path, scenario, **kw).summary_score == 100.0

@@ -43,3 +43,7 @@ def test_tiny_leaderboard_ranks_methods(tmp_path, tiny_scenario):
     assert ok.set_index("method").loc["baselines.trivial:NullMethod", "summary_score"] == 0.0  # the anchor
     assert (board["status"] == "error").sum() == 1
     assert "Leaderboard" in (out / "leaderboard.md").read_text()
+    # statistics in the outputs: unit-bootstrap intervals, guilt calibration, the page
+    assert (ok["summary_score_ci_low"] <= ok["summary_score"]).all() and "brier" in board
+    page = (out / "index.html").read_text()
+    assert "cannot load" in page and "summary_score" in page and 'id="cd-diagram"' in page

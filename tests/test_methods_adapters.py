@@ -183,10 +183,11 @@ def test_readme_pipeline_recipe(tmp_path, monkeypatch):
     assert sk == [("fuelhm_bench.methods.adapters:SklearnMethod",
                    {"estimator": "sklearn.ensemble:IsolationForest"})]
     # from the README to a scored row (the evaluation runner, forked, then the scorer)
-    for m in (method, load_method(*sk[0])):
-        outcome = run_method(m, _evaluation_data(), timeout_s=120)
-        assert outcome.ok, outcome.message
-        assert score_outcome(outcome, _evaluation_data()).summary_score > 0
+    outcome = run_method(method, _evaluation_data(), timeout_s=120)
+    assert outcome.ok, outcome.message
+    assert score_outcome(outcome, _evaluation_data()).summary_score > 0
+    forest = load_method(*sk[0]).fit(_evaluation_data().fit_indicators, random_state=0)
+    assert type(forest.detector_).__name__ == "IsolationForest"
 
 
 def _evaluation_data():

@@ -222,8 +222,15 @@ def test_drift_scenario_prepares_the_nominal_fleet(cache_dir):
 def test_seed_and_scale(cache_dir):
     evaluation = prepare_evaluation(tiny(), fidelity="surrogate", seed=5, scale=0.4,
                                     knowledge_size=SMALL, cache_dir=cache_dir)
-    assert evaluation.units == (0,) and evaluation.scenario.seeds.master == 5
-    assert evaluation.n_flights == 8
+    # --scale keeps every mode of the fleet: the first round(0.4 * 3) = 1 unit, extended as needed
+    from fuelhm_bench.envs.cache import resolve_scenario
+    from fuelhm_bench.flights.scale import scaled_unit_count
+
+    sc = resolve_scenario(tiny())
+    sc = dataclasses.replace(sc, seeds=dataclasses.replace(sc.seeds, master=5, training=None, test=None))
+    n = scaled_unit_count(sc.test_fleet_config(), 0.4)
+    assert evaluation.units == tuple(range(n)) and evaluation.scenario.seeds.master == 5
+    assert evaluation.n_flights == 8 * n
 
 
 @pytest.mark.parametrize("kwargs, match", [

@@ -41,8 +41,10 @@ def scenario_kwargs(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.cli._common import check_output_dir
+    from fuelhm_bench.envs.cache import resolve_scenario
     from fuelhm_bench.exchange import export_scenario
 
+    resolve_scenario(args.scenario)  # a bad scenario fails before any directory is created
     out = check_output_dir(args.out)
     paths = export_scenario(args.scenario, out, raw=args.raw, force=args.force, **scenario_kwargs(args))
     for name, path in paths.items():

@@ -355,14 +355,15 @@ def check_no_lookahead(method: Any, data: CheckData) -> None:
 def check_decide_unit_consistent(method: Any, data: CheckData) -> None:
     """decide_unit equals start_unit + decide flight by flight, whatever the row order."""
     rng = np.random.default_rng(_SEED)
+    fitted = _fresh(method, data)  # each run below starts from a copy of the same fitted state
     for _, table in data.unit_tables():
-        a = _fresh(method, data).decide_unit(table)
-        b = run_unit(_fresh(method, data), table)
+        a = copy.deepcopy(fitted).decide_unit(table)
+        b = run_unit(copy.deepcopy(fitted), table)
         diff = _first_difference(a, b, close=has_batch_path(method))
         if diff is not None:
             raise _CheckFailure(f"decide_unit differs from start_unit + decide: {diff}")
         shuffled = table.iloc[rng.permutation(len(table))]
-        c = _fresh(method, data).decide_unit(shuffled)
+        c = copy.deepcopy(fitted).decide_unit(shuffled)
         diff = _first_difference(a, c, close=has_batch_path(method))
         if diff is not None:
             raise _CheckFailure(f"decide_unit depends on the row order of its input: {diff}")
