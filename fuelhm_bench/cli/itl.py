@@ -28,7 +28,7 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.errors import ParameterError
-    from fuelhm_bench.knowledge import KnowledgeBuild, build_knowledge, write_knowledge
+    from fuelhm_bench.datasets.knowledge import KnowledgeBuild, build_knowledge, write_knowledge
 
     out = check_output_dir(args.out)
     try:

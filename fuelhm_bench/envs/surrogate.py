@@ -113,7 +113,7 @@ class SurrogateModel:
 
     @classmethod
     def from_knowledge(cls, knowledge) -> SurrogateModel:
-        """The surrogate of a :class:`~fuelhm_bench.knowledge.KnowledgeResult`.
+        """The surrogate of a :class:`~fuelhm_bench.datasets.knowledge.KnowledgeResult`.
 
         Parameters
         ----------
