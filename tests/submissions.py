@@ -106,12 +106,11 @@ class Chatty(IdleCurrent):
 
     def _fit(self, healthy, *, knowledge, raw_flights, rng):
         super()._fit(healthy, knowledge=knowledge, raw_flights=raw_flights, rng=rng)
-        sys.stdout.write("x" * 4_000_000)
-        sys.stdout.flush()
         proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
-        Path("orphan.pid").write_text(str(proc.pid))
         self.orphan_ = proc.pid
         print(f"ORPHAN {proc.pid}", file=sys.stderr, flush=True)
+        sys.stdout.write("x" * 4_000_000)
+        sys.stdout.flush()
 
 
 class Peeks(IdleCurrent):
