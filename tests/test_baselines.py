@@ -72,7 +72,7 @@ def test_conformance(check):
 @pytest.mark.slow
 @pytest.mark.parametrize("method", [IsolationForestMethod(), ITLClassifierMethod()])
 def test_conformance_default_configuration(method):
-    check_method(method)
+    check_method(method, sealed=False)
 
 
 @pytest.mark.parametrize("method", [PaperMahalanobis(),
@@ -81,7 +81,7 @@ def test_conformance_without_knowledge(method):
     base = make_check_data(0)
     data = CheckData(healthy=base.healthy, other_healthy=base.other_healthy, units=base.units,
                      knowledge=Knowledge())
-    check_method(method, data=data)
+    check_method(method, data=data, sealed=False)
 
 
 def test_itl_classifier_needs_knowledge():
@@ -96,7 +96,7 @@ def test_itl_classifier_needs_knowledge():
     with pytest.raises(MethodError, match=r"^check_fit_returns_self failed for "
                                           r"ITLClassifierMethod: raised ValueError: "
                                           r".*no such mode"):
-        check_method(ITLClassifierMethod(cv=2), data=data)
+        check_method(ITLClassifierMethod(cv=2), data=data, sealed=False)
 
 
 # ----------------------------------------------------------------------------- entry points

@@ -389,8 +389,10 @@ class SealedMethod:
             raise SealedFailure("invalid", f"{self.name} returned an invalid decision in {where}: {problem}.")
         return decision
 
-    def call(self, op: str, payload: dict, *, phase: str) -> dict:
-        """A custom operation of the child (used by the conformance checks)."""
+    def call(self, op: str, payload: dict, *, phase: str, timeout_s: float | None = None) -> dict:
+        """A custom operation of the child (the conformance checks); ``timeout_s`` restarts the clock."""
+        if timeout_s is not None:
+            self._deadline = time.monotonic() + float(timeout_s)
         return self._call(op, payload, phase=phase)
 
     def _call(self, op: str, payload: dict, *, phase: str) -> dict:
