@@ -12,7 +12,7 @@ from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
 from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.errors import ParameterError
 from fuelhm_bench.methods.sandbox import Limits, SealedMethod
-from submissions import Chatty, Hogs, IdleCurrent, RaisesInInit, Segfaults, Spins, Spy, SysExit
+from submissions import Chatty, Hogs, IdleCurrent, Segfaults, Spins, Spy, SysExit
 from test_runner import tiny
 
 

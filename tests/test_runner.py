@@ -6,8 +6,6 @@ A tiny scenario (3 units x 8 flights, 4 x 4 training flights, 2-minute flights) 
 from __future__ import annotations
 
 import dataclasses
-import os
-import time
 
 import numpy as np
 import pandas as pd
@@ -16,7 +14,7 @@ import yaml
 
 from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.errors import ParameterError
-from fuelhm_bench.methods import BaseMethod, Decision, NullMethod
+from fuelhm_bench.methods import Decision, NullMethod
 from fuelhm_bench.benchmark.harness import (Outcome, action_from_decision, evaluate, observation_row, prepare_evaluation,
                                            run_in_env)
 from fuelhm_bench.scenarios import load_scenario
