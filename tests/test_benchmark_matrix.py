@@ -37,13 +37,14 @@ def _small(name: str):
 @pytest.fixture(scope="module")
 def evaluations(tmp_path_factory):
     cache = tmp_path_factory.mktemp("matrix-cache")
-    return {name: prepare_evaluation(_small(name), fidelity="surrogate", knowledge_size=KnowledgeSize.small(),
+    return {name: prepare_evaluation(_small(name), fidelity="physics", knowledge_size=KnowledgeSize.small(),
                                      robustness=False, cache_dir=cache) for name in SCENARIOS}
 
 
 _LOW_DATA_XFAIL = {("low_data", "isolation-forest"), ("low_data", "itl-classifier")}
 
 
+@pytest.mark.slow  # 8 scenarios' data builds: about 25 s of CPU (minutes of wall time on the shared machine)
 @pytest.mark.parametrize("scenario", SCENARIOS)
 @pytest.mark.parametrize("baseline", BASELINES)
 def test_every_baseline_runs_on_every_scenario(evaluations, scenario, baseline, request):
