@@ -107,6 +107,7 @@ class _Child:
     def __init__(self, conn):
         self.conn = conn
         self.method = None
+        self._index = {}
 
     def reply(self, **data) -> None:
         data.setdefault("status", "ok")
@@ -136,6 +137,13 @@ class _Child:
             self.method = load_method(method, p["params"])
         else:
             self.method = method if not isinstance(method, bytes) else pickle.loads(method)
+            cls = type(self.method)
+            if cls.__module__ not in sys.modules:  # a class built in memory by the caller: same module here
+                import types
+
+                module = types.ModuleType(cls.__module__)
+                setattr(module, cls.__qualname__.split(".")[0], cls)
+                sys.modules[cls.__module__] = module
         get_params = getattr(self.method, "get_params", None)
         params = get_params() if callable(get_params) else {}
         shared = {k: v for k, v in p["shared_params"].items() if k in params}
@@ -163,7 +171,16 @@ class _Child:
     def op_decide(self, p: dict) -> None:
         from fuelhm_bench.methods.decision import Decision, decision_problem
 
-        d = self.method.decide(p["row"])
+        if "row_values" in p:
+            import pandas as pd
+
+            index = self._index.get(p["row_index"])
+            if index is None:
+                index = self._index[p["row_index"]] = pd.Index(p["row_index"])
+            row = pd.Series(p["row_values"], index=index, dtype=object)
+        else:
+            row = p["row"]
+        d = self.method.decide(row)
         if not isinstance(d, Decision):
             problem = decision_problem(d) or f"expected a Decision, got {type(d).__name__}"
             self.reply(status="invalid", message=problem)

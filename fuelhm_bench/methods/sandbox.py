@@ -291,7 +291,16 @@ class SealedMethod:
             try:
                 import cloudpickle
 
-                method = cloudpickle.dumps(method)
+                module = sys.modules.get(type(method).__module__)
+                by_value = (module is not None and module.__name__ != "__main__"
+                            and locate_module(module.__name__) is None)  # built in memory: no file to import
+                if by_value:
+                    cloudpickle.register_pickle_by_value(module)
+                try:
+                    method = cloudpickle.dumps(method)
+                finally:
+                    if by_value:
+                        cloudpickle.unregister_pickle_by_value(module)
             except ImportError:
                 import pickle
 
@@ -374,7 +383,10 @@ class SealedMethod:
         """
         from fuelhm_bench.methods.decision import Decision, decision_problem
 
-        payload = {"row": row}
+        if hasattr(row, "index") and hasattr(row, "tolist"):  # a Series travels as plain tuples (cheap to pickle)
+            payload = {"row_index": tuple(row.index), "row_values": tuple(row.tolist())}
+        else:
+            payload = {"row": row}
         if raw is not None:
             payload["raw"] = raw
         reply = self._call("decide", payload, phase=where)
