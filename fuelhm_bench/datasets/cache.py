@@ -3,7 +3,7 @@
 The environments and the runner need, for a scenario:
 
 * the **published knowledge** (:func:`published_knowledge`): the healthy model,
-  ITL and signatures that :func:`fuelhm_bench.benchmark.loading.scenario_data` builds
+  ITL and signatures that :func:`fuelhm_bench.datasets.knowledge.build_knowledge` builds
   from the benchmark's own simulations of the published model
   (:meth:`KnowledgeBuild.from_scenario <fuelhm_bench.datasets.knowledge.KnowledgeBuild.from_scenario>`);
 * **healthy indicator tables** of the scenario's training fleet
@@ -65,7 +65,7 @@ _MEMORY_SIZE = 64
 class KnowledgeSize:
     """How much to simulate for the published knowledge and the surrogate.
 
-    The defaults reproduce :func:`fuelhm_bench.benchmark.loading.scenario_data`
+    The defaults are those of every evaluation
     (a 6-unit design of experiments, the 8 x 5 published healthy fleet of
     :meth:`~fuelhm_bench.datasets.knowledge.KnowledgeBuild.from_scenario`).
 
@@ -176,7 +176,7 @@ def _with_minutes(config, flight_minutes: float | None):
 def knowledge_build(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None):
     """The :class:`~fuelhm_bench.datasets.knowledge.KnowledgeBuild` of the published knowledge.
 
-    Same recipe as :func:`fuelhm_bench.benchmark.loading.scenario_data`:
+    The recipe:
     :meth:`KnowledgeBuild.from_scenario <fuelhm_bench.datasets.knowledge.KnowledgeBuild.from_scenario>`
     with the training seed (design of experiments and healthy fleet on the
     published model, with the scenario's mission and sensor).
@@ -276,7 +276,7 @@ def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callabl
 def published_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                         cache_dir: str | os.PathLike | bool | None = None,
                         progress: Callable[[int], object] | None = None):
-    """The published knowledge of a scenario (as :func:`fuelhm_bench.benchmark.loading.scenario_data` builds it), cached.
+    """The published knowledge of a scenario (as :func:`fuelhm_bench.datasets.knowledge.build_knowledge` builds it), cached.
 
     Parameters
     ----------
