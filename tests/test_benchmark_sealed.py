@@ -36,6 +36,10 @@ def test_a_spy_finds_no_ground_truth(evaluation, cache_dir, tmp_path, monkeypatc
     dirs = (str(cache_dir), str(out), os.getcwd(), "/tmp")
     outcome = run_in_env(Spy(dirs=dirs), evaluation, log_path=log, deny=[str(out)], timeout_s=120)
     assert outcome.ok, outcome.message
+    if outcome.sandbox.startswith("no file-system restriction"):  # no Landlock: memory probes only, then say so
+        outcome = run_in_env(Spy(), evaluation, log_path=log, timeout_s=120)
+        assert outcome.ok and "SPY FOUND: []" in log.read_text()
+        pytest.skip(f"memory is clean, but the file system is not sealed here: {outcome.sandbox}")
     found = log.read_text()
     assert "SPY FOUND: []" in found, found[-2000:]
     assert not outcome.decisions["alarm"].any()
