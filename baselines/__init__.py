@@ -16,15 +16,15 @@ __all__ = ["ENTRY_POINTS", "load"]
 
 #: Short name -> entry point ``"module:Class"`` of every baseline.
 ENTRY_POINTS: dict[str, str] = {
-    "null": "baselines.trivial:NullMethod",
-    "random": "baselines.trivial:RandomMethod",
-    "paper-mahalanobis": "baselines.paper_mahalanobis:PaperMahalanobis",
-    "isolation-forest": "baselines.isolation_forest:IsolationForestMethod",
-    "itl-classifier": "baselines.itl_classifier:ITLClassifierMethod",
-    "full-gaussian": "baselines.gaussian_full:FullGaussianMethod",
-    "gaussian-mixture": "baselines.gaussian_mixture:GaussianMixtureMethod",
-    "one-class-svm": "baselines.one_class_svm:OneClassSVMMethod",
-    "nearest-neighbour": "baselines.nearest_neighbour:NearestNeighbourMethod",
+    "null": "fuelhm_baselines.trivial:NullMethod",
+    "random": "fuelhm_baselines.trivial:RandomMethod",
+    "paper-mahalanobis": "fuelhm_baselines.paper_mahalanobis:PaperMahalanobis",
+    "isolation-forest": "fuelhm_baselines.isolation_forest:IsolationForestMethod",
+    "itl-classifier": "fuelhm_baselines.itl_classifier:ITLClassifierMethod",
+    "full-gaussian": "fuelhm_baselines.gaussian_full:FullGaussianMethod",
+    "gaussian-mixture": "fuelhm_baselines.gaussian_mixture:GaussianMixtureMethod",
+    "one-class-svm": "fuelhm_baselines.one_class_svm:OneClassSVMMethod",
+    "nearest-neighbour": "fuelhm_baselines.nearest_neighbour:NearestNeighbourMethod",
 }
 
 
@@ -34,7 +34,7 @@ def load(entry_point: str) -> type:
     Parameters
     ----------
     entry_point : str
-        ``"module:Class"`` (e.g. ``"baselines.trivial:NullMethod"``) or a key of
+        ``"module:Class"`` (e.g. ``"fuelhm_baselines.trivial:NullMethod"``) or a key of
         :data:`ENTRY_POINTS` (e.g. ``"paper-mahalanobis"``).
 
     Returns
@@ -51,10 +51,10 @@ def load(entry_point: str) -> type:
 
     Examples
     --------
-    >>> from baselines import load
+    >>> from fuelhm_baselines import load
     >>> load("paper-mahalanobis")(a=3.0).get_params()["a"]
     3.0
-    >>> load("baselines.trivial:NullMethod")()
+    >>> load("fuelhm_baselines.trivial:NullMethod")()
     NullMethod()
     """
     if ":" not in entry_point:

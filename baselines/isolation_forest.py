@@ -17,9 +17,9 @@ from fuelhm_bench.diagnosis import HealthyModel
 from fuelhm_bench.methods import BaseMethod, Decision, Knowledge
 from fuelhm_bench.methods.params import Interval, Options, RandomState
 
-from baselines._common import (ModeSubset, collinearity_guilt_7, cross_fit_folds,
-                               indicator_values, reference_signatures, row_values, sklearn_seed,
-                               standardisation)
+from fuelhm_baselines._common import (ModeSubset, collinearity_guilt_7, cross_fit_folds,
+                                      indicator_values, reference_signatures, row_values, sklearn_seed,
+                                      standardisation)
 
 __all__ = ["IsolationForestMethod"]
 
@@ -52,7 +52,7 @@ class IsolationForestMethod(BaseMethod):
     **Diagnosis.** Only on an alarm: ``diagnosis="collinearity"`` gives guilt
     proportional to the collinearity of the flight's Z-scores (NaN where
     missing) with the published reference signatures, exactly as
-    :class:`baselines.paper_mahalanobis.PaperMahalanobis` (uniform when no
+    :class:`fuelhm_baselines.paper_mahalanobis.PaperMahalanobis` (uniform when no
     signature is published); ``diagnosis="uniform"`` always gives 1/7 to
     every mode (detection only).
 
@@ -73,7 +73,7 @@ class IsolationForestMethod(BaseMethod):
         Guilt on an alarm (see above).
     symmetric_modes : tuple of str, default=("null_bias_drift",)
         Modes scored with ``|cos|`` by the collinearity diagnosis (see
-        :class:`~baselines.paper_mahalanobis.PaperMahalanobis`).
+        :class:`~fuelhm_baselines.paper_mahalanobis.PaperMahalanobis`).
     random_state : int, numpy.random.Generator or None, default=None
         Seed of the folds and of the forests (integer seeds drawn from
         ``rng_``).

@@ -23,8 +23,8 @@ from fuelhm_bench.methods import BaseMethod, Decision, Knowledge, normalize_guil
 from fuelhm_bench.methods.params import Interval, RandomState
 from fuelhm_bench.taxonomy import MODE_IDS
 
-from baselines._common import (ModeSubset, cross_fit_folds, indicator_values, itl_coefficients,
-                               row_values, sklearn_seed, standardisation)
+from fuelhm_baselines._common import (ModeSubset, cross_fit_folds, indicator_values, itl_coefficients,
+                                      row_values, sklearn_seed, standardisation)
 
 __all__ = ["ITLClassifierMethod"]
 

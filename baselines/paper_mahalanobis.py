@@ -26,7 +26,7 @@ from fuelhm_bench.diagnosis import HealthyModel
 from fuelhm_bench.methods import BaseMethod, Decision, Knowledge
 from fuelhm_bench.methods.params import Interval, Options, RandomState
 
-from baselines._common import (ModeSubset, collinearity_guilt_7, cross_fit_folds,
+from fuelhm_baselines._common import (ModeSubset, collinearity_guilt_7, cross_fit_folds,
                                indicator_values, reference_signatures, row_values,
                                training_sequences, window_mean)
 

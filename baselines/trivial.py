@@ -1,7 +1,7 @@
 """Trivial anchors of every results table: never alarm, and alarm at random (NAB practice).
 
-``baselines.trivial:NullMethod`` is :class:`fuelhm_bench.methods.NullMethod`
-itself (it has no randomness). ``baselines.trivial:RandomMethod`` is a thin
+``fuelhm_baselines.trivial:NullMethod`` is :class:`fuelhm_bench.methods.NullMethod`
+itself (it has no randomness). ``fuelhm_baselines.trivial:RandomMethod`` is a thin
 subclass of :class:`fuelhm_bench.methods.RandomMethod` whose only difference is
 the default seed, ``random_state=0``, so that the leaderboard row is
 reproducible from its entry point and hyperparameters alone (a seed passed to

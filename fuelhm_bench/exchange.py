@@ -81,7 +81,7 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
     -------
     ScenarioTables
     """
-    from fuelhm_bench.envs.cache import resolve_scenario, scored_indicators, training_indicators
+    from fuelhm_bench.datasets.cache import resolve_scenario, scored_indicators, training_indicators
     from fuelhm_bench.flights.fleet import build_units
     from fuelhm_bench.flights.scale import scaled_unit_count
     from fuelhm_bench.runner import _split_training

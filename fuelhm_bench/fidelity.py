@@ -274,7 +274,7 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
     """
     import time
 
-    from fuelhm_bench.envs.cache import resolve_scenario
+    from fuelhm_bench.datasets.cache import resolve_scenario
 
     sc = resolve_scenario(scenario)
     if methods is None:

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from fuelhm_bench.indicators import StreamingExtractor, extract_indicators
-from fuelhm_bench.indicators.synthetic import synthetic_flight
+from fuelhm_bench.testing.indicators import synthetic_flight
 
 N_SAMPLES = 10_000_000
 CHUNK = 65_536

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pytest
 
-from fuelhm_bench.knowledge import KnowledgeBuild, build_knowledge
+from fuelhm_bench.datasets.knowledge import KnowledgeBuild, build_knowledge
 
 
 @pytest.mark.benchmark(group="pipeline")
@@ -29,10 +29,10 @@ def test_itl_default_design(benchmark):
 
 @pytest.mark.benchmark(group="pipeline")
 def test_paper_study(benchmark):
-    from fuelhm_bench.paper import run_paper
+    from fuelhm_bench.benchmark.paper import run_paper
 
     result = benchmark.pedantic(run_paper, rounds=1, iterations=1)
     assert result.table_v.shape[0] == 5
     benchmark.extra_info.update(result.timings)
     print(f"\nfuelhm-bench paper (paper_2012 as shipped): {benchmark.stats.stats.min:.1f} s "
-          f"(knowledge {result.timings['knowledge_s']:.1f} s, test fleet {result.timings['test_fleet_s']:.1f} s)")
+          f"(data {result.timings['data_s']:.1f} s, method and scoring {result.timings['method_and_scoring_s']:.1f} s)")

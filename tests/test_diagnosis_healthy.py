@@ -13,7 +13,7 @@ from scipy.spatial.distance import mahalanobis
 from sklearn.base import clone
 
 from fuelhm_bench.diagnosis import HealthyModel, NotFittedError, chi2_equivalent
-from fuelhm_bench.diagnosis.synthetic import DEFAULT_MEAN, DEFAULT_STD, make_healthy_table
+from fuelhm_bench.testing.diagnosis import DEFAULT_MEAN, DEFAULT_STD, make_healthy_table
 from fuelhm_bench.errors import DataFormatError, FuelHMError, ParameterError, UnknownNameError
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
 

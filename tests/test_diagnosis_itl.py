@@ -8,7 +8,7 @@ import pytest
 from matplotlib.image import imread
 
 from fuelhm_bench.diagnosis import ITL, ITL_COLUMNS, fit_itl, fit_through_origin, paired_deltas, plot_itl
-from fuelhm_bench.diagnosis.synthetic import DEFAULT_STD, make_doe_table
+from fuelhm_bench.testing.diagnosis import DEFAULT_STD, make_doe_table
 from fuelhm_bench.errors import DataFormatError, OutputPathError, ParameterError, UnknownNameError
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 

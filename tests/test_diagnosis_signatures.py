@@ -19,7 +19,7 @@ from fuelhm_bench.diagnosis import (
     signature_to_csv,
     signature_to_markdown,
 )
-from fuelhm_bench.diagnosis.synthetic import DEFAULT_STD, make_doe_table, make_healthy_table
+from fuelhm_bench.testing.diagnosis import DEFAULT_STD, make_doe_table, make_healthy_table
 from fuelhm_bench.errors import DataFormatError, OutputPathError, ParameterError, UnknownNameError
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 

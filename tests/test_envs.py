@@ -24,7 +24,7 @@ from gymnasium.utils.env_checker import check_env
 import fuelhm_bench.envs  # noqa: F401 - registers the environment ids
 from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.envs.actuation_loop import INDICATOR_BOUNDS, ActuationLoopEnv
-from fuelhm_bench.envs.cache import (cache_key, clear_memory_cache, default_cache_dir, published_knowledge,
+from fuelhm_bench.datasets.cache import (cache_key, clear_memory_cache, default_cache_dir, published_knowledge,
                                      surrogate_knowledge, training_indicators)
 from fuelhm_bench.errors import ParameterError, UnknownNameError
 from sizes import FLIGHT_MINUTES, TINY_FLIGHTS, TINY_UNITS, knowledge_size
@@ -158,7 +158,7 @@ def test_surrogate_and_physics_share_the_truth_of_a_seed(cache_dir):
 
 def test_physics_replay_is_the_scenarios_fleet(cache_dir):
     """reset(options={"unit": k}) flies exactly the flights of fleet_indicators(Scenario.test_fleet_config())."""
-    from fuelhm_bench.datasets import fleet_indicators
+    from fuelhm_bench.datasets.fleets import fleet_indicators
 
     sc = small_scenario("all_modes", units=3, flights=5)
     env = ActuationLoopEnv(scenario=sc, fidelity="physics", flight_minutes=MINUTES, maintenance=False)
@@ -360,9 +360,9 @@ def test_surrogate_matches_physics_distributions(cache_dir):
 
 # --------------------------------------------------------------------------- cache
 def test_knowledge_cache_memory_disk_and_fresh_build_agree(tmp_path):
-    from fuelhm_bench.knowledge import build_knowledge
+    from fuelhm_bench.datasets.knowledge import build_knowledge
 
-    from fuelhm_bench.envs.cache import knowledge_build
+    from fuelhm_bench.datasets.cache import knowledge_build
 
     sc = small_scenario()
     first = published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path)

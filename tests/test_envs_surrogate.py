@@ -185,7 +185,7 @@ def test_model_validates_its_arrays(model):
 def test_surrogate_healthy_flights_sit_where_physics_flights_do(tmp_path):
     """Under the covariance of physics healthy flights, surrogate healthy flights are as far from the mean
     as fresh physics flights (the old Gaussian surrogate's median distance was 3.7 times the physics')."""
-    from fuelhm_bench.envs.cache import surrogate_knowledge, training_indicators
+    from fuelhm_bench.datasets.cache import surrogate_knowledge, training_indicators
     from fuelhm_bench.envs import KnowledgeSize
     from fuelhm_bench.taxonomy import INDICATOR_NAMES
 

@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 from fuelhm_bench.errors import ParameterError
 from fuelhm_bench.indicators import indicators_from_curve, velocity_gain_curve, velocity_points
 from fuelhm_bench.indicators.plot import plot_velocity_gain, velocity_gain_figure
-from fuelhm_bench.indicators.synthetic import DualGainCurve, synthetic_flight
+from fuelhm_bench.testing.indicators import DualGainCurve, synthetic_flight
 
 
 @pytest.fixture(scope="module")

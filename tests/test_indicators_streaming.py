@@ -22,7 +22,7 @@ from fuelhm_bench.indicators import (
     indicators_from_curve,
     velocity_gain_curve,
 )
-from fuelhm_bench.indicators.synthetic import synthetic_flight
+from fuelhm_bench.testing.indicators import synthetic_flight
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
 
 RTOL = 1e-12

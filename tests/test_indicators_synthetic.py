@@ -1,6 +1,6 @@
 """Indicators recovered on synthetic flights drawn on a known piecewise-linear curve.
 
-The synthetic flights (``fuelhm_bench.indicators.synthetic``) have a known dual-gain curve
+The synthetic flights (``fuelhm_bench.testing.indicators``) have a known dual-gain curve
 (X1=-1.5, X2=2.5 mA, Inb=0.5 mA, I0=0.74 mA, G_in=11, G_null=6, G_out=12.5 mm/s/mA,
 saturation at -75 / +87 mm/s), a rate-independent hysteresis of +/-0.1 mA during ramps, an
 idle current wandering in levels of standard deviation 0.05 mA (the known Hys0), current and
@@ -36,7 +36,7 @@ from fuelhm_bench.indicators import (
     indicators_from_curve,
     velocity_gain_curve,
 )
-from fuelhm_bench.indicators.synthetic import DualGainCurve, synthetic_flight
+from fuelhm_bench.testing.indicators import DualGainCurve, synthetic_flight
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
 
 ABS_TOL = {"X1": 0.05, "X2": 0.05, "Inb": 0.03, "Y1": 0.5, "Y2": 0.5, "I0": 0.005}

@@ -10,7 +10,7 @@ import pytest
 
 from fuelhm_bench.errors import DataFormatError
 from fuelhm_bench.indicators import extract_indicators, extract_table, table_columns
-from fuelhm_bench.indicators.synthetic import synthetic_flight
+from fuelhm_bench.testing.indicators import synthetic_flight
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
 
 EXPECTED_COLUMNS = (

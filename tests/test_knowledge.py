@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from fuelhm_bench.cli import main
-from fuelhm_bench.diagnosis.doe import DesignOfExperiments, run_doe
+from fuelhm_bench.datasets.doe import DesignOfExperiments, run_doe
 from fuelhm_bench.flights.mission import MissionProfile
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 

@@ -7,12 +7,12 @@ import pytest
 
 from fuelhm_bench.cli import main
 from fuelhm_bench.errors import ScenarioError
-from fuelhm_bench.leaderboard import LeaderboardConfig
+from fuelhm_bench.benchmark.leaderboard import LeaderboardConfig
 
 
 def test_shipped_leaderboard_file_loads():
     config = LeaderboardConfig.from_yaml("leaderboard/methods.yaml")
-    assert any(m.method == "baselines.trivial:NullMethod" for m in config.methods)
+    assert any(m.method == "fuelhm_baselines.trivial:NullMethod" for m in config.methods)
     assert "paper_2012" in config.scenarios
 
 
@@ -32,15 +32,15 @@ def test_bad_leaderboard_files(tmp_path, text, match):
 def test_tiny_leaderboard_ranks_methods(tmp_path, tiny_scenario):
     scenario = tiny_scenario(tmp_path)
     cfg = tmp_path / "lb.yaml"
-    cfg.write_text(f"methods:\n  - baselines.trivial:NullMethod\n  - method: baselines.paper_mahalanobis:PaperMahalanobis\n"
+    cfg.write_text(f"methods:\n  - fuelhm_baselines.trivial:NullMethod\n  - method: fuelhm_baselines.paper_mahalanobis:PaperMahalanobis\n"
                    f"    params: {{a: 2.0}}\n  - broken.module:Nothing\nscenarios: [{scenario}]\n")
     out = tmp_path / "board"
     assert main(["leaderboard", "--config", str(cfg), "--out", str(out)]) == 0
     board = pd.read_csv(out / "leaderboard.csv")
     ok = board[board["status"] == "ok"]
-    assert set(ok["method"]) == {"baselines.paper_mahalanobis:PaperMahalanobis", "baselines.trivial:NullMethod"}
+    assert set(ok["method"]) == {"fuelhm_baselines.paper_mahalanobis:PaperMahalanobis", "fuelhm_baselines.trivial:NullMethod"}
     assert list(ok["summary_score"]) == sorted(ok["summary_score"], reverse=True)  # ranked
-    assert ok.set_index("method").loc["baselines.trivial:NullMethod", "summary_score"] == 0.0  # the anchor
+    assert ok.set_index("method").loc["fuelhm_baselines.trivial:NullMethod", "summary_score"] == 0.0  # the anchor
     assert (board["status"] == "error").sum() == 1
     assert "Leaderboard" in (out / "leaderboard.md").read_text()
     # statistics in the outputs: unit-bootstrap intervals, guilt calibration, the page

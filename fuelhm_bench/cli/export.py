@@ -41,7 +41,7 @@ def scenario_kwargs(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.cli._common import check_output_dir
-    from fuelhm_bench.envs.cache import resolve_scenario
+    from fuelhm_bench.datasets.cache import resolve_scenario
     from fuelhm_bench.exchange import export_scenario
 
     resolve_scenario(args.scenario)  # a bad scenario fails before any directory is created

@@ -31,7 +31,7 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.errors import ParameterError
-    from fuelhm_bench.knowledge import KnowledgeBuild, build_knowledge, write_knowledge
+    from fuelhm_bench.datasets.knowledge import KnowledgeBuild, build_knowledge, write_knowledge
 
     try:
         intensities = tuple(float(x) for x in args.intensities.split(","))

@@ -19,22 +19,24 @@ def register(sub) -> None:
     p.add_argument("--doe-units", type=positive_int, default=8, help="units of the ITL design of experiments")
     p.add_argument("--scale", type=positive_float, default=1.0,
                    help="shrink the fleets (e.g. 0.2 for a quick look); 1 = the scenario as written")
+    p.add_argument("--cache-dir", default=None, help="cache of simulated knowledge and flights")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from fuelhm_bench.paper import run_paper
-    from fuelhm_bench.paper_report import print_tables, write_outputs
+    from fuelhm_bench.benchmark.paper import run_paper
+    from fuelhm_bench.benchmark.paper_report import print_tables, write_outputs
     from fuelhm_bench.scenarios import load_scenario
 
     out = check_output_dir(args.out)
     sc = load_scenario(args.scenario)
-    test = sc.test_fleet_config()
-    train = sc.training_fleet_config()
-    n_total = int(round(test.n_units * args.scale)) * test.n_flights + train.n_units * train.n_flights
-    with progress_bar(n_total, "paper study") as bar:
-        result = run_paper(sc, doe_units=args.doe_units, scale=args.scale, progress=bar.update,
+    with progress_bar(0, "paper study") as bar:
+        def grow(n: int) -> None:  # the total is unknown: the cache may answer
+            bar.total += n
+            bar.update(n)
+
+        result = run_paper(sc, doe_units=args.doe_units, scale=args.scale, progress=grow, cache_dir=args.cache_dir,
                            on_stage=lambda s: bar.set_postfix_str(s[:40]) if not bar.disable
                            else print(f"[paper] {s}", file=sys.stderr))
     print_tables(result)

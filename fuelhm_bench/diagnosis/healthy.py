@@ -130,7 +130,7 @@ class HealthyModel(BaseEstimator):
     --------
     >>> import numpy as np
     >>> from fuelhm_bench.diagnosis import HealthyModel
-    >>> from fuelhm_bench.diagnosis.synthetic import make_healthy_table
+    >>> from fuelhm_bench.testing.diagnosis import make_healthy_table
     >>> rng = np.random.default_rng(0)
     >>> healthy = make_healthy_table(500, rng=rng)
     >>> model = HealthyModel().fit(healthy)

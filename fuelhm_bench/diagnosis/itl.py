@@ -206,7 +206,7 @@ class ITL:
     --------
     >>> import numpy as np, pandas as pd
     >>> from fuelhm_bench.diagnosis import fit_itl
-    >>> from fuelhm_bench.diagnosis.synthetic import make_doe_table
+    >>> from fuelhm_bench.testing.diagnosis import make_doe_table
     >>> coef = pd.DataFrame({"X1": [0.4], "X2": [0.4]}, index=["null_bias_drift"])
     >>> itl = fit_itl(make_doe_table(coef, rng=np.random.default_rng(0)))
     >>> round(float(itl.matrix().loc["null_bias_drift", "X1"]), 2)

@@ -62,7 +62,7 @@ def signature_matrix(itl: ITL, healthy_model: HealthyModel, *, max_intensity=1.0
     --------
     >>> import numpy as np, pandas as pd
     >>> from fuelhm_bench.diagnosis import HealthyModel, ITL, signature_matrix
-    >>> from fuelhm_bench.diagnosis.synthetic import make_healthy_table
+    >>> from fuelhm_bench.testing.diagnosis import make_healthy_table
     >>> model = HealthyModel(features=["X1", "Y1"]).fit(make_healthy_table(50, rng=np.random.default_rng(0)))
     >>> itl = ITL(pd.DataFrame({"mode": ["backlash"] * 2, "indicator": ["X1", "Y1"], "A": [0.5, 0.0],
     ...                         "r2": [1.0, 1.0], "residual_std": [0.0, 0.0], "n": [4, 4]}))

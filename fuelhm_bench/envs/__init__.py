@@ -33,7 +33,7 @@ ActuationLoopEnv
 KnowledgeSize, published_knowledge, training_indicators, scored_indicators, surrogate_knowledge,
 default_cache_dir, clear_memory_cache
     Cached simulated products: published knowledge, training flights, scored flights, the
-    surrogate's inputs (:mod:`fuelhm_bench.envs.cache`).
+    surrogate's inputs (:mod:`fuelhm_bench.datasets.cache`).
 SurrogateModel, fit_surrogate, surrogate_doe
     The surrogate fidelity, learnt from physics indicator tables (:mod:`fuelhm_bench.envs.surrogate`),
     and the design of experiments it is learnt on.
@@ -58,16 +58,16 @@ ENV_IDS: dict[str, str] = {
 
 _LAZY = {
     "ActuationLoopEnv": "fuelhm_bench.envs.actuation_loop",
-    "KnowledgeSize": "fuelhm_bench.envs.cache",
-    "published_knowledge": "fuelhm_bench.envs.cache",
-    "default_cache_dir": "fuelhm_bench.envs.cache",
-    "clear_memory_cache": "fuelhm_bench.envs.cache",
-    "surrogate_knowledge": "fuelhm_bench.envs.cache",
-    "surrogate_doe": "fuelhm_bench.envs.cache",
-    "surrogate_healthy": "fuelhm_bench.envs.cache",
+    "KnowledgeSize": "fuelhm_bench.datasets.cache",
+    "published_knowledge": "fuelhm_bench.datasets.cache",
+    "default_cache_dir": "fuelhm_bench.datasets.cache",
+    "clear_memory_cache": "fuelhm_bench.datasets.cache",
+    "surrogate_knowledge": "fuelhm_bench.datasets.cache",
+    "surrogate_doe": "fuelhm_bench.datasets.cache",
+    "surrogate_healthy": "fuelhm_bench.datasets.cache",
     "fit_surrogate": "fuelhm_bench.envs.surrogate",
-    "training_indicators": "fuelhm_bench.envs.cache",
-    "scored_indicators": "fuelhm_bench.envs.cache",
+    "training_indicators": "fuelhm_bench.datasets.cache",
+    "scored_indicators": "fuelhm_bench.datasets.cache",
     "SurrogateModel": "fuelhm_bench.envs.surrogate",
 }
 

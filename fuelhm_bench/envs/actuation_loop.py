@@ -13,7 +13,7 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from fuelhm_bench.envs._validation import did_you_mean, reject_unknown
-from fuelhm_bench.envs.cache import KnowledgeSize, resolve_scenario, surrogate_knowledge
+from fuelhm_bench.datasets.cache import KnowledgeSize, resolve_scenario, surrogate_knowledge
 from fuelhm_bench.envs.surrogate import SurrogateModel
 from fuelhm_bench.errors import DataFormatError, ParameterError
 from fuelhm_bench.flights.fleet import build_units, mission_rng, noise_rng, rng_for, unit_rng
@@ -74,7 +74,7 @@ class ActuationLoopEnv(gym.Env):
     resampled flight-to-flight residuals with their invalid indicators, and the
     per-unit, per-intensity responses of a design of experiments:
     :class:`~fuelhm_bench.envs.surrogate.SurrogateModel`; inputs from
-    :func:`~fuelhm_bench.envs.cache.surrogate_knowledge`, cached), thousands of
+    :func:`~fuelhm_bench.datasets.cache.surrogate_knowledge`, cached), thousands of
     times faster.
 
     ## Action Space
@@ -92,7 +92,7 @@ class ActuationLoopEnv(gym.Env):
     (a probability per mode, the paper's collinearity guilt) so that a method
     of the common interface maps onto an action without loss. A Box cannot
     say "sums to 1": the environment only requires each entry in [0, 1]; the
-    runner (:mod:`fuelhm_bench.runner`) records the guilt for the diagnosis
+    runner (:mod:`fuelhm_bench.benchmark.harness`) records the guilt for the diagnosis
     KPIs. Guilt does not enter the reward (v0 and v1). An action outside the space
     raises :class:`~fuelhm_bench.errors.ParameterError` naming the space.
 
@@ -151,7 +151,7 @@ class ActuationLoopEnv(gym.Env):
     after the flight: every mode active on that flight is removed and does not
     recur in the episode (modes scheduled to start later still do). A false
     alarm changes nothing. ``maintenance=False`` (for the paper's KPIs, and
-    what :mod:`fuelhm_bench.runner` uses): alarms are only scored, faults
+    what :mod:`fuelhm_bench.benchmark.harness` uses): alarms are only scored, faults
     evolve as scheduled whatever the agent does, and each mode's failure is
     charged once, on the first flight where it reaches ``failure_fraction``.
 
@@ -203,7 +203,7 @@ class ActuationLoopEnv(gym.Env):
     | flight_minutes  | None           | flight duration [min] overriding the scenario's (>= start + 1 min); short flights make tests fast |
     | raw             | False          | add the resampled raw flight to the observation (physics only)              |
     | raw_samples     | 256            | samples per raw row, in [2, 100000]                                         |
-    | knowledge       | None           | a precomputed :class:`~fuelhm_bench.knowledge.KnowledgeResult` the surrogate draws from (its ``healthy_model``, ``healthy_table``, ``itl``); None: :func:`~fuelhm_bench.envs.cache.surrogate_knowledge` |
+    | knowledge       | None           | a precomputed :class:`~fuelhm_bench.datasets.knowledge.KnowledgeResult` the surrogate draws from (its ``healthy_model``, ``healthy_table``, ``itl``); None: :func:`~fuelhm_bench.datasets.cache.surrogate_knowledge` |
     | knowledge_size  | None           | :class:`~fuelhm_bench.envs.KnowledgeSize` (or a dict of its fields) of that build; ``KnowledgeSize.small()`` for tests |
     | cache_dir       | None           | cache of the simulated products; None: ``$FUELHM_BENCH_CACHE`` or ``~/.cache/fuelhm-bench``; False: memory only |
     | render_mode     | None           | no rendering is implemented                                                  |
@@ -329,7 +329,7 @@ class ActuationLoopEnv(gym.Env):
 
         Without maintenance a replayed unit's flights do not depend on the
         actions, so its observations can be simulated once
-        (:func:`fuelhm_bench.envs.cache.scored_indicators`) and shared by every
+        (:func:`fuelhm_bench.datasets.cache.scored_indicators`) and shared by every
         agent or method evaluated; rewards and truth are computed as usual.
 
         Parameters

@@ -3,7 +3,7 @@
 The surrogate replaces the simulation and the extraction of a flight by a draw
 whose law is learnt, once, from two indicator tables simulated by the physics
 (:func:`fit_surrogate`, a pure function of the tables; the cached call site is
-:func:`fuelhm_bench.envs.cache.surrogate_knowledge`):
+:func:`fuelhm_bench.datasets.cache.surrogate_knowledge`):
 
 * a **healthy table** of many units flying several flights each (``unit_id``
   column), with the scored fleet's truth model (hidden effects, drift);
@@ -246,7 +246,7 @@ class SurrogateModel:
 
     @classmethod
     def from_knowledge(cls, knowledge) -> SurrogateModel:
-        """:func:`fit_surrogate` on a :class:`~fuelhm_bench.knowledge.KnowledgeResult`'s ``healthy_table`` and ``doe_table``."""
+        """:func:`fit_surrogate` on a :class:`~fuelhm_bench.datasets.knowledge.KnowledgeResult`'s ``healthy_table`` and ``doe_table``."""
         return fit_surrogate(knowledge.healthy_table, knowledge.doe_table)
 
     # ------------------------------------------------------------------ draws

@@ -90,7 +90,7 @@ def healthy_statistics(env: gym.Env) -> tuple[np.ndarray, np.ndarray]:
             + surrogate.flight_factor @ surrogate.flight_factor.T
         mean, std = np.asarray(surrogate.mean, float), np.sqrt(np.diag(cov))
     else:
-        from fuelhm_bench.envs.cache import training_indicators
+        from fuelhm_bench.datasets.cache import training_indicators
 
         table = training_indicators(base.scenario, flight_minutes=base.flight_minutes)
         x = table[list(INDICATOR_NAMES)].to_numpy(dtype=float)

@@ -15,7 +15,7 @@ Two extractors share every definition and the final curve -> indicator step:
 Exact definitions: ``docs/indicators.md`` and the docstrings of :mod:`.velocity`,
 :mod:`.fit` and :mod:`.indicators`. Plots: :mod:`fuelhm_bench.indicators.plot` (imported
 separately, it needs matplotlib). Synthetic test flights with known indicators:
-:mod:`fuelhm_bench.indicators.synthetic`.
+:mod:`fuelhm_bench.testing.indicators`.
 """
 
 from fuelhm_bench.indicators.batch import (

@@ -190,7 +190,7 @@ def extract_indicators(time_s: object, current_ma: object, position_mm: object,
     Examples
     --------
     >>> from fuelhm_bench.indicators import extract_indicators
-    >>> from fuelhm_bench.indicators.synthetic import DualGainCurve, synthetic_flight
+    >>> from fuelhm_bench.testing.indicators import DualGainCurve, synthetic_flight
     >>> f = synthetic_flight(DualGainCurve(), n_excursions=200, seed=1)
     >>> r = extract_indicators(f.time_s, f.current_ma, f.position_mm)
     >>> r.all_valid, abs(r.values["Inb"] - 0.5) < 0.05

@@ -91,7 +91,7 @@ class StreamingExtractor:
     Examples
     --------
     >>> from fuelhm_bench.indicators import StreamingExtractor
-    >>> from fuelhm_bench.indicators.synthetic import DualGainCurve, synthetic_flight
+    >>> from fuelhm_bench.testing.indicators import DualGainCurve, synthetic_flight
     >>> f = synthetic_flight(DualGainCurve(), n_excursions=200, seed=1)
     >>> ex = StreamingExtractor(flight_id="demo")
     >>> for s in range(0, len(f.time_s), 1000):

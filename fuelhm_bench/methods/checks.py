@@ -548,7 +548,8 @@ def iter_checks(method: Any, *, data: CheckData | None = None) -> Iterator[Metho
         yield MethodCheck(name=func.__name__, method=method, func=func, data=shared)
 
 
-def check_method(method: Any, *, data: CheckData | None = None) -> None:
+def check_method(method: Any, *, data: CheckData | None = None, sealed: bool = True,
+                 timeout_s: float = 120.0) -> None:
     """Run every conformance check on ``method``; raise at the first failure.
 
     Parameters
@@ -557,6 +558,16 @@ def check_method(method: Any, *, data: CheckData | None = None) -> None:
         An (unfitted) method instance.
     data : CheckData or None, default=None
         Custom check data; None uses :func:`make_check_data` with seed 0.
+    sealed : bool, default=True
+        Run the checks in a sealed child process
+        (:class:`~fuelhm_bench.methods.sandbox.SealedMethod`), each within
+        ``timeout_s``: a method that hangs, calls ``os._exit``, raises
+        ``SystemExit`` or is killed fails the check with a named message
+        instead of hanging or ending the caller. False: in this process
+        (what :func:`iter_checks` and :func:`parametrize_with_checks` do).
+    timeout_s : float, default=120.0
+        Wall-time limit of each check (and of importing and building the
+        method) in the sealed process [s], > 0.
 
     Raises
     ------
@@ -566,10 +577,43 @@ def check_method(method: Any, *, data: CheckData | None = None) -> None:
     Examples
     --------
     >>> from fuelhm_bench.methods import RandomMethod, check_method
-    >>> check_method(RandomMethod(alarm_probability=0.2))
+    >>> check_method(RandomMethod(alarm_probability=0.2), sealed=False)
     """
-    for check in iter_checks(method, data=data):
-        check()
+    if not sealed:
+        for check in iter_checks(method, data=data):
+            check()
+        return
+    from fuelhm_bench.methods.sandbox import Limits, SealedFailure, SealedMethod
+
+    shared = make_check_data(_SEED) if data is None else data
+    name = type(method).__name__
+    sandbox = SealedMethod(method, limits=Limits(wall_s=float(timeout_s)))
+    try:
+        try:
+            sandbox.start()
+        except SealedFailure as exc:
+            raise MethodError(f"{name} could not be started in a sealed process: {exc.status}: "
+                              f"{exc.message}") from None
+        for func in _CHECKS:
+            try:
+                reply = sandbox.call("check", {"name": func.__name__, "data": shared}, phase=func.__name__,
+                                     timeout_s=float(timeout_s))
+            except SealedFailure as exc:
+                raise MethodError(f"{func.__name__} failed for {name}: {exc.status}: {exc.message}") from None
+            if reply.get("failed"):
+                raise MethodError(str(reply["failed"]))
+    finally:
+        sandbox.close()
+
+
+def _run_one_check(method: Any, name: str, data: CheckData) -> dict:
+    """Run the check ``name`` in this process (the sealed child); ``{"failed": message}`` when it fails."""
+    func = next(f for f in _CHECKS if f.__name__ == name)
+    try:
+        MethodCheck(name=name, method=method, func=func, data=data)()
+    except MethodError as exc:
+        return {"failed": str(exc)}
+    return {}
 
 
 def parametrize_with_checks(methods: Sequence[Any]) -> Any:

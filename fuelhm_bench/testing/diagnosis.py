@@ -72,7 +72,7 @@ def make_healthy_table(
     Examples
     --------
     >>> import numpy as np
-    >>> from fuelhm_bench.diagnosis.synthetic import make_healthy_table
+    >>> from fuelhm_bench.testing.diagnosis import make_healthy_table
     >>> make_healthy_table(3, rng=np.random.default_rng(0)).shape
     (3, 23)
     """
@@ -146,7 +146,7 @@ def make_doe_table(
     Examples
     --------
     >>> import numpy as np, pandas as pd
-    >>> from fuelhm_bench.diagnosis.synthetic import make_doe_table
+    >>> from fuelhm_bench.testing.diagnosis import make_doe_table
     >>> coef = pd.DataFrame({"X1": [0.3]}, index=["null_bias_drift"])
     >>> doe = make_doe_table(coef, rng=np.random.default_rng(0), n_units=2)
     >>> doe["mode"].value_counts().to_dict()

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from fuelhm_bench.diagnosis.doe import DesignOfExperiments, run_doe
+from fuelhm_bench.datasets.doe import DesignOfExperiments, run_doe
 from fuelhm_bench.diagnosis.healthy import HealthyModel
 from fuelhm_bench.diagnosis.itl import ITL, fit_itl, plot_itl
 from fuelhm_bench.diagnosis.signatures import plot_signature_heatmap, signature_matrix, signature_to_markdown
@@ -117,7 +117,7 @@ class KnowledgeResult:
 def build_knowledge(build: KnowledgeBuild = KnowledgeBuild(), *, extraction=None,
                     progress: Callable[[int], object] | None = None) -> KnowledgeResult:
     """Simulate the healthy fleet and the design of experiments; fit the healthy model, ITL and signatures."""
-    from fuelhm_bench.datasets import fleet_indicators
+    from fuelhm_bench.datasets.fleets import fleet_indicators
 
     healthy_table, _ = fleet_indicators(build.healthy_fleet, extraction=extraction, progress=progress)
     doe_table = run_doe(build.doe, extraction=extraction, progress=progress)

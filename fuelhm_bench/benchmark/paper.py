@@ -2,7 +2,7 @@
 
 Steps: healthy training fleet -> healthy model; design of experiments -> ITL ->
 signature matrix (Table IV); test fleet with the two degradations -> the paper's
-method (``baselines.paper_mahalanobis:PaperMahalanobis``: Mahalanobis score,
+method (``fuelhm_baselines.paper_mahalanobis:PaperMahalanobis``: Mahalanobis score,
 threshold mu + A sigma, collinearity diagnosis against the two reference
 signatures) -> scorer -> Tables V and VI; figures equivalent to Figs. 4, 5, 8 and
 10; a Markdown report that puts every table beside the published values.
@@ -10,11 +10,9 @@ signatures) -> scorer -> Tables V and VI; figures equivalent to Figs. 4, 5, 8 an
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -53,61 +51,44 @@ class PaperResult:
     mission: object = None
 
 
-def _split_training(train: pd.DataFrame, fraction: float = 0.25) -> tuple[pd.DataFrame, pd.DataFrame]:
-    units = list(dict.fromkeys(train["unit_id"]))
-    n_cal = max(1, int(round(fraction * len(units))))
-    cal = set(units[-n_cal:])
-    mask = train["unit_id"].isin(cal)
-    return train[~mask].reset_index(drop=True), train[mask].reset_index(drop=True)
-
-
 def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3, 5), scale: float = 1.0,
-              progress: Callable[[int], object] | None = None, on_stage: Callable[[str], object] | None = None
-              ) -> PaperResult:
-    """Run the study. ``scale`` < 1 shrinks the scored fleet (for quick checks); 1 is the scenario."""
-    from fuelhm_bench.datasets import fleet_indicators
-    from fuelhm_bench.evaluation import EvaluationData, run_method
-    from fuelhm_bench.knowledge import KnowledgeBuild, build_knowledge
+              progress: Callable[[int], object] | None = None, on_stage: Callable[[str], object] | None = None,
+              cache_dir=None, timeout_s: float = 600.0) -> PaperResult:
+    """Run the study through the benchmark's harness.
+
+    The data are those of every evaluation (:func:`~fuelhm_bench.benchmark.harness.prepare_evaluation`,
+    physics fidelity, cached); the paper's method
+    (``fuelhm_baselines.paper_mahalanobis:PaperMahalanobis``, ``a=2``) runs sealed
+    (:func:`~fuelhm_bench.benchmark.harness.run_in_env`) with the signatures of the
+    two modes of the study. ``scale`` < 1 shrinks the scored fleet (quick checks).
+    """
+    from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
+    from fuelhm_bench.datasets.cache import KnowledgeSize, resolve_scenario
+    from fuelhm_bench.errors import MethodError
     from fuelhm_bench.methods import Knowledge
-    from fuelhm_bench.scenarios import load_scenario
-    from fuelhm_bench.scoring import Run, ScoringConfig, score_run
+    from fuelhm_bench.scoring import ScoringConfig, score_run
 
     stage = on_stage or (lambda s: None)
-    sc = load_scenario(scenario) if not hasattr(scenario, "test_fleet_config") else scenario
+    sc = resolve_scenario(scenario)
     timings = {}
     t0 = time.perf_counter()
-    train_cfg = sc.training_fleet_config()
-    test_cfg = sc.test_fleet_config()
-    if scale != 1.0:  # only the scored fleet shrinks: the healthy model needs the unit-to-unit dispersion
-        from fuelhm_bench.flights.scale import scaled_unit_count  # every mode stays represented
-        test_cfg = dataclasses.replace(test_cfg, n_units=scaled_unit_count(test_cfg, scale, minimum=2))
-    stage("knowledge: healthy training fleet, design of experiments, ITL, signatures")
-    build = KnowledgeBuild.from_scenario(sc, doe_units=doe_units, seed=train_cfg.seed)
-    build = dataclasses.replace(build, healthy_fleet=train_cfg)
-    knowledge = build_knowledge(build, progress=progress)
-    timings["knowledge_s"] = time.perf_counter() - t0
-
-    t1 = time.perf_counter()
-    stage("test fleet")
-    test_ind, test_lab = fleet_indicators(test_cfg, progress=progress)
-    timings["test_fleet_s"] = time.perf_counter() - t1
+    stage("data: published knowledge (design of experiments, ITL, signatures), training and scored flights")
+    evaluation = prepare_evaluation(sc, fidelity="physics", scale=scale, robustness=False,
+                                    knowledge_size=KnowledgeSize(doe_units=doe_units), cache_dir=cache_dir,
+                                    progress=progress)
+    knowledge = evaluation.knowledge
+    timings["data_s"] = time.perf_counter() - t0
 
     t2 = time.perf_counter()
-    stage("paper method: fit, thresholds, decisions")
-    fit_part, cal_part = _split_training(knowledge.healthy_table)
+    stage("paper method (sealed): fit, thresholds, decisions")
     sig = knowledge.signatures.loc[list(PAPER_MODES)]
     method_knowledge = Knowledge(itl=knowledge.itl.table, signatures=sig, max_intensity=dict(knowledge.max_intensity))
-    from baselines.paper_mahalanobis import PaperMahalanobis
-
-    data = EvaluationData(fit_part, cal_part, test_ind, test_lab, method_knowledge, name=sc.name)
-    outcome = run_method(PaperMahalanobis(a=2.0), data, random_state=0, timeout_s=600)
+    outcome = run_in_env("fuelhm_baselines.paper_mahalanobis:PaperMahalanobis", evaluation, params={"a": 2.0},
+                         knowledge=method_knowledge, timeout_s=timeout_s)
     if not outcome.ok:
-        from fuelhm_bench.errors import MethodError
-
-        raise MethodError(f"The paper method failed: {outcome.message}")
+        raise MethodError(f"The paper method failed: {outcome.status}: {outcome.message}")
     config = ScoringConfig(a_values=tuple(float(a) for a in a_values))
-    run = Run(labels=test_lab, decisions=outcome.decisions, healthy_scores=outcome.healthy_scores,
-              name="paper_mahalanobis")
+    run = outcome.run("paper_mahalanobis")
     card = score_run(run, config)
     timings["method_and_scoring_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
@@ -115,11 +96,13 @@ def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3
     table_iv = _table_iv(knowledge.signatures)
     table_v = _table_v(card, config)
     table_vi = _table_vi(card)
-    sizes = {"training_flights": len(knowledge.healthy_table), "fit_flights": len(fit_part),
-             "calibration_flights": len(cal_part), "doe_flights": len(knowledge.doe_table),
-             "test_flights": len(test_ind), "test_units": test_cfg.n_units,
-             "flight_minutes": test_cfg.mission.duration_s / 60.0}
-    return PaperResult(table_iv, table_v, table_vi, card, run, knowledge, timings, sizes, test_cfg.mission)
+    mission = sc.test_fleet_config().mission
+    sizes = {"training_flights": len(evaluation.fit_indicators) + len(evaluation.calibration_indicators),
+             "fit_flights": len(evaluation.fit_indicators),
+             "calibration_flights": len(evaluation.calibration_indicators), "doe_flights": len(knowledge.doe_table),
+             "test_flights": evaluation.n_flights, "test_units": len(evaluation.units),
+             "flight_minutes": mission.duration_s / 60.0}
+    return PaperResult(table_iv, table_v, table_vi, card, run, knowledge, timings, sizes, mission)
 
 
 def _table_iv(signatures: pd.DataFrame) -> pd.DataFrame:

@@ -16,23 +16,23 @@ scheduled as in the paper's KPIs), and for every flight
 
 The ground truth comes back once per episode, in the terminal
 ``info["episode_truth"]``; it is turned into the labels table and never shown
-to the method. The protocol of :mod:`fuelhm_bench.evaluation` is kept: ``fit``
+to the method. The protocol of :mod:`fuelhm_bench.benchmark.loading` is kept: ``fit``
 on the fit part of the healthy training flights with the published knowledge,
 healthy calibration scores on held-out training units (thresholds
 ``mu + A sigma`` of Table V come from them only), then the causal decisions.
 
-Safety is that of :func:`fuelhm_bench.evaluation.run_method`: ``fit``, the
-calibration scores *and the whole episode loop* run in a forked child process
-with a wall-clock limit, so a method that raises, hangs or returns invalid
-output yields an :class:`EnvOutcome` with ``status`` ``"error"``,
-``"timeout"`` or ``"invalid"``; the caller's process and other methods'
-results are never affected. Progress (flights done) is reported from the
-child to the parent through the same pipe.
+This module is the one harness of the benchmark: ``evaluate``,
+``leaderboard`` and ``paper`` all run methods through :func:`run_in_env`.
+The method runs sealed (:class:`~fuelhm_bench.methods.sandbox.SealedMethod`):
+in its own process, with limits, seeing only the tables and rows it is sent;
+the environment, the schedule and the labels stay in this process. Whatever
+the method does, the result is one :class:`Outcome` with a ``status`` and a
+one-line ``message``.
 
 Examples
 --------
 >>> from fuelhm_bench.methods import NullMethod
->>> from fuelhm_bench.runner import evaluate
+>>> from fuelhm_bench.benchmark.harness import evaluate
 >>> outcome = evaluate(NullMethod(), "paper_2012", fidelity="surrogate")  # doctest: +SKIP
 >>> outcome.status, outcome.kpis()["fnr_standard_alarm"]                  # doctest: +SKIP
 ('ok', 1.0)
@@ -41,20 +41,18 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import multiprocessing
 import time
-import traceback
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.errors import DataFormatError, FuelHMError, MethodError, ParameterError
+from fuelhm_bench.errors import DataFormatError, FuelHMError, ParameterError
 from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
 
-__all__ = ["EnvEvaluation", "EnvOutcome", "action_from_decision", "evaluate", "observation_row",
-           "prepare_evaluation", "run_in_env"]
+__all__ = ["EnvEvaluation", "Outcome", "action_from_decision", "evaluate", "observation_row",
+           "prepare_evaluation", "run_in_env", "split_training"]
 
 _VALID = tuple(f"{n}_valid" for n in INDICATOR_NAMES)
 _ROW_INDEX = pd.Index(["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *_VALID])
@@ -163,8 +161,10 @@ class EnvEvaluation:
         return self.knowledge.as_method_knowledge()
 
 
-def _split_training(train: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Fit / calibration parts of the healthy training table, as :func:`fuelhm_bench.evaluation.scenario_data`.
+def split_training(train: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Fit / calibration parts of the healthy training table (the one home of this split).
+
+    The last quarter of the units (at least one) calibrate the thresholds; the rest fit the method.
 
     Only the columns of an observation row are kept (no ``n_points`` / ``quality_reason``: the
     environment does not observe them), so a method sees the same columns in training and scoring.
@@ -183,8 +183,7 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
                        cache_dir=None, progress=None) -> EnvEvaluation:
     """Load a scenario, get its published knowledge and training flights (cached), make the environment.
 
-    The data are those of :func:`fuelhm_bench.evaluation.scenario_data`: the
-    published knowledge from the benchmark's own simulations of the published
+    The data: the published knowledge from the benchmark's own simulations of the published
     model, the methods' healthy flights from the scenario's training fleet
     (split into fit and calibration units the same way, restricted to the
     columns of :func:`observation_row`) and, with the physics fidelity, the very
@@ -212,7 +211,7 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
         Simulation sizes of the knowledge and the surrogate; None: the
         defaults (:class:`~fuelhm_bench.envs.KnowledgeSize`).
     cache_dir : str, path-like, False or None, default=None
-        Cache of the simulated products (see :mod:`fuelhm_bench.envs.cache`).
+        Cache of the simulated products (see :mod:`fuelhm_bench.datasets.cache`).
     progress : callable, optional
         Called with numbers of flights simulated while building them.
 
@@ -221,7 +220,7 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     EnvEvaluation
     """
     from fuelhm_bench.envs.actuation_loop import ActuationLoopEnv
-    from fuelhm_bench.envs.cache import (KnowledgeSize, published_knowledge, resolve_scenario, scored_indicators,
+    from fuelhm_bench.datasets.cache import (KnowledgeSize, published_knowledge, resolve_scenario, scored_indicators,
                                          surrogate_knowledge, training_indicators)
 
     sc = resolve_scenario(scenario)
@@ -237,7 +236,7 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     fidelity = sc.fidelity if fidelity is None else fidelity
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
     knowledge = published_knowledge(sc, size=size, **common)
-    fit_part, cal_part = _split_training(training_indicators(sc, **common))
+    fit_part, cal_part = split_training(training_indicators(sc, **common))
     from fuelhm_bench.flights.scale import scaled_unit_count  # every mode of the fleet stays represented
     n_units = scaled_unit_count(sc.test_fleet_config(), scale)
     scored = sc if n_units == sc.fleet.units else dataclasses.replace(
@@ -251,7 +250,7 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
                                flight_minutes=flight_minutes, knowledge=env_knowledge)
         if env.fidelity == "physics":  # flights do not depend on the actions: simulate them once for all methods
             env.load_replays(scored_indicators(sc, units=n_units, drifted=drifted, **common))
-        env.reset(options={"unit": 0})  # builds the scored fleet before any fork
+        env.reset(options={"unit": 0})  # builds the scored fleet once, up front
         return EnvEvaluation(scored, env.fidelity, tuple(range(n_units)), knowledge, fit_part, cal_part, env,
                              nominal)
 
@@ -261,25 +260,24 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
 
 # --------------------------------------------------------------------------- outcome
 @dataclass(frozen=True, eq=False)
-class EnvOutcome:
-    """What happened when a method was run through the environment.
+class Outcome:
+    """What happened when a method was run through the harness (the one outcome type).
 
     Attributes
     ----------
     method : str
-        ``repr`` of the method.
-    status : {"ok", "error", "invalid", "timeout"}
+        The method's name (entry point, or class name of an instance).
+    status : {"ok", "error", "crash", "timeout", "cpu_limit", "memory", "invalid"}
         ``"error"``: the method raised (or the environment failed, said in the
-        message); ``"invalid"``: it broke the Decision contract or returned
-        unusable output; ``"timeout"``: it was stopped after ``timeout_s``.
+        message); ``"crash"``: its process died (``os._exit``, a signal);
+        ``"timeout"``, ``"cpu_limit"``, ``"memory"``: it hit a limit;
+        ``"invalid"``: it broke the Decision contract or returned unusable output.
     message : str
-        Empty when ok; otherwise what went wrong (with the traceback for errors).
+        Empty when ok; otherwise one line saying what went wrong and where.
     decisions : DataFrame or None
         ``unit_id, flight_index, score, alarm, guilt_<mode>`` per scored flight.
     labels : DataFrame or None
-        Ground truth of the same flights (``flight_id``, ``unit_id``,
-        ``flight_index``, ``intensity_<mode>``, ``max_intensity_<mode>``,
-        ``onset_<mode>``).
+        Ground truth of the same flights.
     healthy_scores : ndarray or None
         The method's scores on the healthy calibration flights.
     episodes : DataFrame or None
@@ -288,11 +286,16 @@ class EnvOutcome:
         alarms; the cost under the maintenance protocol is ``cost_kusd``),
         ``alarms``, ``false_alarms``, ``undetected_flights``, ``failures``.
     seconds : float
-        Wall time (fit, calibration and episodes).
-    scenario : str
-        Scenario id.
-    fidelity : str
-        Fidelity of the scored flights.
+        Wall time of the whole run [s].
+    scenario, fidelity : str
+        Scenario id and fidelity of the scored flights.
+    fit_seconds, decide_seconds : float
+        Wall time of ``fit`` (measured in the sealed process) and of the
+        calibration scores plus every decision (seen from the harness) [s].
+    params : dict
+        The method's hyperparameters as reported by it (JSON values).
+    sandbox : str
+        The isolation applied (see :mod:`fuelhm_bench.methods.sandbox`).
     costs : CostSpec or None
         The scenario's cost model (``cost_kusd``; None: the default CostSpec).
     """
@@ -307,6 +310,10 @@ class EnvOutcome:
     seconds: float = 0.0
     scenario: str = ""
     fidelity: str = ""
+    fit_seconds: float = float("nan")
+    decide_seconds: float = float("nan")
+    params: dict = dataclasses.field(default_factory=dict)
+    sandbox: str = ""
     costs: Any = None
 
     @property
@@ -361,9 +368,9 @@ class EnvOutcome:
         return kpis
 
 
-# --------------------------------------------------------------------------- the child
+# --------------------------------------------------------------------------- the sealed run
 class _EnvFailure(Exception):
-    """The environment (not the method) failed inside the child."""
+    """The environment (not the method) failed."""
 
 
 def _env_call(fn, *args, **kwargs):
@@ -373,25 +380,20 @@ def _env_call(fn, *args, **kwargs):
         raise _EnvFailure(f"{type(exc).__name__}: {exc}") from exc
 
 
-def _episodes(method, evaluation: EnvEvaluation, conn) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
-    from fuelhm_bench.methods import decision_problem
+def _episodes(sealed, evaluation: EnvEvaluation, progress) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     from fuelhm_bench.methods.tables import DECISION_COLUMNS
 
     env = evaluation.env
     n = env.n_flights
-    name = type(method).__name__
     unit_col, flight_col, scores, alarms, guilts = [], [], [], [], []
     labels, episodes = [], []
     for k in evaluation.units:
         obs, info = _env_call(env.reset, options={"unit": k})
-        method.start_unit(k)
+        sealed.start_unit(k)
         total, terminated = 0.0, False
         for f in range(n):
             row = observation_row(obs, k, f, k * n + f)
-            decision = method.decide(row)
-            problem = decision_problem(decision)
-            if problem is not None:
-                raise MethodError(f"{name} returned an invalid decision for unit {k!r}, flight {f}: {problem}.")
+            decision = sealed.decide(row, where=f"decide (unit {k}, flight {f})")
             unit_col.append(k)
             flight_col.append(f)
             scores.append(decision.score)
@@ -408,7 +410,8 @@ def _episodes(method, evaluation: EnvEvaluation, conn) -> tuple[pd.DataFrame, pd
                          "false_alarms": int((alarm_k & ~truth["detectable"]).sum()),
                          "undetected_flights": int((~alarm_k & truth["detectable"]).sum()),
                          "failures": int(truth["failure"].sum())})
-        conn.send(("progress", n))
+        if progress is not None:
+            progress(n)
     guilt = np.array(guilts, dtype=np.float64).reshape(len(scores), len(MODE_IDS))
     data = {"unit_id": np.array(unit_col, dtype=np.int64), "flight_index": np.array(flight_col, dtype=np.int64),
             "score": np.array(scores, dtype=np.float64), "alarm": np.array(alarms, dtype=bool)}
@@ -417,99 +420,81 @@ def _episodes(method, evaluation: EnvEvaluation, conn) -> tuple[pd.DataFrame, pd
     return decisions, pd.concat(labels, ignore_index=True), pd.DataFrame(episodes)
 
 
-def _child(method, evaluation: EnvEvaluation, random_state, conn) -> None:
-    from fuelhm_bench.methods import run_table
-
-    try:
-        method.fit(evaluation.fit_indicators, knowledge=evaluation.method_knowledge, random_state=random_state)
-        healthy = run_table(method, evaluation.calibration_indicators)["score"].to_numpy(dtype=float)
-        decisions, labels, episodes = _episodes(method, evaluation, conn)
-        conn.send(("ok", "", (decisions, labels, healthy, episodes)))
-    except _EnvFailure as exc:
-        conn.send(("error", f"The environment failed (not the method): {exc}\n"
-                            f"{traceback.format_exc(limit=8)}", None))
-    except MethodError as exc:
-        conn.send(("invalid", str(exc), None))
-    except BaseException as exc:  # noqa: BLE001 - the method is untrusted code
-        conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=8)}", None))
-    finally:
-        conn.close()
-
-
-def run_in_env(method, evaluation: EnvEvaluation, *, random_state: int = 0, timeout_s: float = 600.0,
-               progress=None) -> EnvOutcome:
-    """Fit ``method`` and run it on every scored unit in a child process; never raises for the method's faults.
+def run_in_env(method, evaluation: EnvEvaluation, *, random_state: int = 0, timeout_s: float | None = None,
+               limits=None, params: dict | None = None, shared_params: dict | None = None, knowledge=None,
+               log_path=None, deny=(), progress=None) -> Outcome:
+    """Fit ``method`` sealed and run it on every scored unit; never raises for the method's faults.
 
     Parameters
     ----------
-    method : BaseMethod
-        Any object with ``fit``, ``start_unit`` and ``decide`` (the common interface).
+    method : str or BaseMethod
+        ``"module:Class"`` (imported only in the sealed process) or an unfitted
+        instance (any object with ``fit``, ``start_unit`` and ``decide``).
     evaluation : EnvEvaluation
         From :func:`prepare_evaluation`.
     random_state : int, default=0
         Passed to ``fit``.
-    timeout_s : float, default=600.0
-        Wall-clock limit of fit + calibration + all episodes [s], > 0.
+    timeout_s : float, optional
+        Wall-clock limit [s], > 0 (overrides ``limits.wall_s``).
+    limits : Limits or dict, optional
+        Resource limits (:class:`~fuelhm_bench.methods.sandbox.Limits`).
+    params, shared_params : dict, optional
+        Hyperparameters of ``module:Class``; hyperparameters applied when the method has them.
+    knowledge : Knowledge, optional
+        Handed to ``fit`` instead of the evaluation's published knowledge.
+    log_path : path-like, optional
+        The method's stdout/stderr (size-bounded); None: dropped.
+    deny : sequence of path-like, default=()
+        Paths the method must not read (added to the simulation cache).
     progress : callable, optional
         Called with the number of flights done after each unit.
 
     Returns
     -------
-    EnvOutcome
+    Outcome
     """
-    if not (isinstance(timeout_s, (int, float)) and not isinstance(timeout_s, bool) and timeout_s > 0):
-        raise ParameterError(f"The 'timeout_s' parameter of run_in_env must be a number > 0. Got {timeout_s!r} "
-                             f"instead.")
-    name = repr(method)
+    from fuelhm_bench.datasets.cache import default_cache_dir
+    from fuelhm_bench.methods.sandbox import Limits, SealedFailure, SealedMethod
+
+    limits = Limits.coerce(limits, "limits")
+    if timeout_s is not None:
+        if not (isinstance(timeout_s, (int, float)) and not isinstance(timeout_s, bool) and timeout_s > 0):
+            raise ParameterError(f"The 'timeout_s' parameter of run_in_env must be a number > 0. Got {timeout_s!r} "
+                                 f"instead.")
+        limits = dataclasses.replace(limits, wall_s=float(timeout_s))
+    name = method if isinstance(method, str) else type(method).__name__
     meta = {"scenario": evaluation.scenario.id, "fidelity": evaluation.fidelity,
             "costs": evaluation.scenario.costs}
-    ctx = multiprocessing.get_context("fork")
-    parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(method, evaluation, random_state, child), daemon=True)
+    hidden = [default_cache_dir(), *deny]
+    sealed = SealedMethod(method, params=params, shared_params=shared_params, limits=limits, log_path=log_path,
+                          deny=hidden)
     t0 = time.perf_counter()
-    proc.start()
-    child.close()
-    deadline = t0 + timeout_s
+    fit_s = decide_s = float("nan")
     try:
-        while True:
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0 or not parent.poll(remaining):
-                _stop(proc)
-                return EnvOutcome(name, "timeout", f"{name} did not finish within {timeout_s:g} s; it was stopped.",
-                                  seconds=time.perf_counter() - t0, **meta)
-            try:
-                message = parent.recv()
-            except EOFError:
-                proc.join(5)
-                return EnvOutcome(name, "error", f"{name} crashed the worker process (exit code {proc.exitcode}).",
-                                  seconds=time.perf_counter() - t0, **meta)
-            if message[0] == "progress":
-                if progress is not None:
-                    progress(message[1])
-                continue
-            break
+        info = sealed.start()
+        t_fit = sealed.fit(evaluation.fit_indicators,
+                           knowledge=evaluation.method_knowledge if knowledge is None else knowledge,
+                           random_state=random_state)
+        fit_s = float(t_fit.get("wall_s", float("nan")))
+        t1 = time.perf_counter()
+        healthy = sealed.scores(evaluation.calibration_indicators)
+        decisions, labels, episodes = _episodes(sealed, evaluation, progress)
+        decide_s = time.perf_counter() - t1
+    except SealedFailure as exc:
+        return Outcome(name, exc.status, exc.message, seconds=time.perf_counter() - t0, fit_seconds=fit_s,
+                       params=sealed.info.get("params", {}), sandbox=sealed.sandbox, **meta)
+    except _EnvFailure as exc:
+        return Outcome(name, "error", f"The environment failed (not the method): {exc}",
+                       seconds=time.perf_counter() - t0, **meta)
     finally:
-        parent.close()
-    proc.join(5)
-    if proc.is_alive():
-        _stop(proc)
+        sealed.close()
     seconds = time.perf_counter() - t0
-    status, text, payload = message
-    if status != "ok":
-        return EnvOutcome(name, status, text, seconds=seconds, **meta)
-    decisions, labels, healthy, episodes = payload
+    extra = {"fit_seconds": fit_s, "decide_seconds": decide_s, "params": info.get("params", {}),
+             "sandbox": sealed.sandbox}
     problem = _check_outputs(name, decisions, labels, healthy, evaluation)
     if problem:
-        return EnvOutcome(name, "invalid", problem, seconds=seconds, **meta)
-    return EnvOutcome(name, "ok", "", decisions, labels, healthy, episodes, seconds, **meta)
-
-
-def _stop(proc) -> None:
-    proc.terminate()
-    proc.join(5)
-    if proc.is_alive():
-        proc.kill()
-        proc.join(5)
+        return Outcome(name, "invalid", problem, seconds=seconds, **meta, **extra)
+    return Outcome(name, "ok", "", decisions, labels, healthy, episodes, seconds, **meta, **extra)
 
 
 def _check_outputs(name: str, decisions, labels, healthy, evaluation: EnvEvaluation) -> str:
@@ -523,20 +508,20 @@ def _check_outputs(name: str, decisions, labels, healthy, evaluation: EnvEvaluat
     try:
         Run(labels=labels, decisions=decisions, healthy_scores=healthy, name=name)
     except DataFormatError as exc:
-        return f"{name}: its output cannot be scored: {exc}"
+        return f"{name}: its output cannot be scored: {str(exc).splitlines()[0]}"
     return ""
 
 
 # --------------------------------------------------------------------------- one call
 def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None = None, scale: float = 1.0,
              flight_minutes: float | None = None, random_state: int = 0, timeout_s: float = 600.0,
-             knowledge_size=None, cache_dir=None, progress: bool = False) -> EnvOutcome:
+             limits=None, knowledge_size=None, cache_dir=None, progress=None) -> Outcome:
     """Evaluate one method on one scenario through the environment (:func:`prepare_evaluation` + :func:`run_in_env`).
 
     Parameters
     ----------
-    method : BaseMethod
-        The method (not modified: the child process fits its own copy).
+    method : str or BaseMethod
+        ``"module:Class"`` or an unfitted instance (not modified: the sealed process fits its own copy).
     scenario : str, Path or Scenario
         A shipped name, a YAML path or a loaded scenario.
     fidelity, seed, scale, flight_minutes, knowledge_size, cache_dir
@@ -544,19 +529,20 @@ def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None 
     random_state : int, default=0
         Passed to ``fit``.
     timeout_s : float, default=600.0
-        Time limit of the method [s].
-    progress : bool, default=False
-        Show progress bars on stderr (:func:`fuelhm_bench.cli._common.progress_bar`).
+        Wall-time limit of the method [s].
+    limits : Limits or dict, optional
+        Other resource limits (CPU time, memory, log size).
+    progress : callable, optional
+        ``progress(total, description)`` returning a context manager with ``update(n)`` and a
+        mutable ``total`` (such as :func:`tqdm.tqdm`); the command line hands its progress bar down.
 
     Returns
     -------
-    EnvOutcome
+    Outcome
         Call ``.kpis()`` or ``.score()`` on it.
     """
-    if progress:
-        from fuelhm_bench.cli._common import progress_bar
-
-        with progress_bar(0, "published knowledge") as bar:
+    if progress is not None:
+        with progress(0, "published knowledge") as bar:
             def grow(k: int) -> None:
                 bar.total += k
                 bar.update(k)
@@ -564,10 +550,11 @@ def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None 
             evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
                                             flight_minutes=flight_minutes, knowledge_size=knowledge_size,
                                             cache_dir=cache_dir, progress=grow)
-        with progress_bar(evaluation.n_flights, f"{type(method).__name__} on {evaluation.scenario.id}") as bar:
-            return run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s,
+        with progress(evaluation.n_flights, f"{method if isinstance(method, str) else type(method).__name__} on "
+                                            f"{evaluation.scenario.id}") as bar:
+            return run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s, limits=limits,
                               progress=bar.update)
     evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
                                     flight_minutes=flight_minutes, knowledge_size=knowledge_size,
                                     cache_dir=cache_dir)
-    return run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s)
+    return run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s, limits=limits)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.paper import PAPER_MODES, PaperResult
+from fuelhm_bench.benchmark.paper import PAPER_MODES, PaperResult
 
 
 def _fmt(df: pd.DataFrame, digits: int = 1) -> str:

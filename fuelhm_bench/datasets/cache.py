@@ -3,9 +3,9 @@
 The environments and the runner need, for a scenario:
 
 * the **published knowledge** (:func:`published_knowledge`): the healthy model,
-  ITL and signatures that :func:`fuelhm_bench.evaluation.scenario_data` builds
+  ITL and signatures that :func:`fuelhm_bench.datasets.knowledge.build_knowledge` builds
   from the benchmark's own simulations of the published model
-  (:meth:`KnowledgeBuild.from_scenario <fuelhm_bench.knowledge.KnowledgeBuild.from_scenario>`);
+  (:meth:`KnowledgeBuild.from_scenario <fuelhm_bench.datasets.knowledge.KnowledgeBuild.from_scenario>`);
 * **healthy indicator tables** of the scenario's training fleet
   (:func:`training_indicators`): what methods are fitted on, and, continued to
   more units and flights and with the scored fleet's drift, what the
@@ -65,9 +65,9 @@ _MEMORY_SIZE = 64
 class KnowledgeSize:
     """How much to simulate for the published knowledge and the surrogate.
 
-    The defaults reproduce :func:`fuelhm_bench.evaluation.scenario_data`
+    The defaults are those of every evaluation
     (a 6-unit design of experiments, the 8 x 5 published healthy fleet of
-    :meth:`~fuelhm_bench.knowledge.KnowledgeBuild.from_scenario`).
+    :meth:`~fuelhm_bench.datasets.knowledge.KnowledgeBuild.from_scenario`).
 
     Parameters
     ----------
@@ -142,7 +142,11 @@ class KnowledgeSize:
         if isinstance(value, cls):
             return value
         if isinstance(value, dict):
-            from fuelhm_bench.envs._validation import did_you_mean
+            from difflib import get_close_matches
+
+            def did_you_mean(key, names):
+                close = get_close_matches(str(key), names, n=1)
+                return f" Did you mean {close[0]!r}?" if close else ""
 
             names = [f.name for f in dataclasses.fields(cls)]
             for key in value:
@@ -180,10 +184,10 @@ def _with_minutes(config, flight_minutes: float | None):
 
 
 def knowledge_build(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None):
-    """The :class:`~fuelhm_bench.knowledge.KnowledgeBuild` of the published knowledge.
+    """The :class:`~fuelhm_bench.datasets.knowledge.KnowledgeBuild` of the published knowledge.
 
-    Same recipe as :func:`fuelhm_bench.evaluation.scenario_data`:
-    :meth:`KnowledgeBuild.from_scenario <fuelhm_bench.knowledge.KnowledgeBuild.from_scenario>`
+    The recipe:
+    :meth:`KnowledgeBuild.from_scenario <fuelhm_bench.datasets.knowledge.KnowledgeBuild.from_scenario>`
     with the training seed (design of experiments and healthy fleet on the
     published model, with the scenario's mission and sensor).
 
@@ -198,7 +202,7 @@ def knowledge_build(scenario, *, flight_minutes: float | None = None, size: Know
     -------
     KnowledgeBuild
     """
-    from fuelhm_bench.knowledge import KnowledgeBuild
+    from fuelhm_bench.datasets.knowledge import KnowledgeBuild
 
     sc = resolve_scenario(scenario)
     size = KnowledgeSize() if size is None else size
@@ -282,7 +286,7 @@ def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callabl
 def published_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                         cache_dir: str | os.PathLike | bool | None = None,
                         progress: Callable[[int], object] | None = None):
-    """The published knowledge of a scenario (as :func:`fuelhm_bench.evaluation.scenario_data` builds it), cached.
+    """The published knowledge of a scenario (as :func:`fuelhm_bench.datasets.knowledge.build_knowledge` builds it), cached.
 
     Parameters
     ----------
@@ -302,7 +306,7 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     KnowledgeResult
         The same tables and fitted numbers whichever cache answered.
     """
-    from fuelhm_bench.knowledge import build_knowledge
+    from fuelhm_bench.datasets.knowledge import build_knowledge
 
     sc = resolve_scenario(scenario)
     _check_minutes(flight_minutes, "published_knowledge")
@@ -348,7 +352,7 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
     pandas.DataFrame
         The table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
     """
-    from fuelhm_bench.datasets import fleet_indicators
+    from fuelhm_bench.datasets.fleets import fleet_indicators
 
     sc = resolve_scenario(scenario)
     _check_minutes(flight_minutes, "training_indicators")
@@ -395,7 +399,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
     pandas.DataFrame
         The indicator table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
     """
-    from fuelhm_bench.datasets import fleet_indicators
+    from fuelhm_bench.datasets.fleets import fleet_indicators
 
     sc = resolve_scenario(scenario)
     _check_minutes(flight_minutes, "scored_indicators")
@@ -509,7 +513,7 @@ def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     KnowledgeResult
     """
     from fuelhm_bench.diagnosis.healthy import HealthyModel
-    from fuelhm_bench.knowledge import KnowledgeResult
+    from fuelhm_bench.datasets.knowledge import KnowledgeResult
 
     size = KnowledgeSize() if size is None else size
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
@@ -521,11 +525,11 @@ def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: 
 
 
 def _refit(healthy: pd.DataFrame, doe: pd.DataFrame, max_intensity: dict):
-    """The fitting half of :func:`fuelhm_bench.knowledge.build_knowledge`, on stored tables."""
+    """The fitting half of :func:`fuelhm_bench.datasets.knowledge.build_knowledge`, on stored tables."""
     from fuelhm_bench.diagnosis.healthy import HealthyModel
     from fuelhm_bench.diagnosis.itl import fit_itl
     from fuelhm_bench.diagnosis.signatures import signature_matrix
-    from fuelhm_bench.knowledge import KnowledgeResult
+    from fuelhm_bench.datasets.knowledge import KnowledgeResult
 
     healthy_model = HealthyModel().fit(healthy)
     itl = fit_itl(doe)

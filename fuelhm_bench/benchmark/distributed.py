@@ -1,0 +1,76 @@
+"""Leaderboard tasks on a Dask cluster: a local one (``--jobs N``) or an existing one (``--scheduler``).
+
+The task graph: one **data build** per (scenario, seed)
+(:func:`~fuelhm_bench.benchmark.leaderboard.build_data`, which fills the
+simulation cache), on which every **evaluation** of that (scenario, seed)
+depends (:func:`~fuelhm_bench.benchmark.leaderboard.evaluate_task`: it reads the
+built data from the cache and runs the method sealed on the worker). Results
+come back to the client, which alone writes the store as they complete, so an
+interrupted distributed run resumes like a local one.
+
+A local cluster uses worker *processes* (one thread each) listening on the
+loopback interface only. For several machines, start a scheduler and workers
+yourself (``dask scheduler`` on one host, ``dask worker tcp://HOST:8786
+--nthreads 1`` on the others, e.g. over SSH, or with dask-jobqueue on a batch
+system) with a cache directory every worker can read (``--cache-dir`` on a
+shared file system), and pass ``--scheduler tcp://HOST:8786``.
+"""
+
+from __future__ import annotations
+
+from fuelhm_bench.errors import FuelHMError, ParameterError
+
+__all__ = ["run_distributed"]
+
+
+def _client(jobs: int, scheduler: str | None):
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:  # pragma: no cover - distributed is a dependency
+        raise FuelHMError("--jobs/--scheduler need the 'distributed' package (pip install distributed).") from None
+    if scheduler is not None:
+        try:
+            return Client(scheduler, timeout="20s"), None
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ParameterError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there: {exc}") from None
+    if not (isinstance(jobs, int) and jobs >= 1):
+        raise ParameterError(f"--jobs must be an integer >= 1. Got {jobs!r} instead.")
+    cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None, silence_logs=40)
+    return Client(cluster), cluster
+
+
+def run_distributed(todo, kwargs: dict, done, *, jobs: int = 2, scheduler: str | None = None) -> None:
+    """Run ``todo`` tasks on Dask; ``done(record, tables)`` is called in this process as each one completes."""
+    from dask.distributed import as_completed
+
+    from fuelhm_bench.benchmark.leaderboard import build_data
+
+    client, cluster = _client(jobs, scheduler)
+    try:
+        builds = {}
+        futures = []
+        for t in todo:
+            group = (t.scenario, t.seed, t.fidelity, t.scale)
+            if group not in builds:
+                builds[group] = client.submit(build_data, t.scenario, t.seed, t.fidelity, t.scale,
+                                              kwargs["cache_dir"], kwargs["flight_minutes"], pure=False,
+                                              key=f"data-{t.scenario_id}-{t.seed}-{t.key[:8]}")
+            futures.append(client.submit(_evaluate_after, builds[group], t, kwargs, pure=False,
+                                         key=f"eval-{t.key[:16]}"))
+        for future in as_completed(futures):
+            try:
+                record, tables = future.result()
+            except Exception as exc:  # noqa: BLE001 - a worker lost or a data build failed
+                raise FuelHMError(f"A distributed task failed: {type(exc).__name__}: {exc}") from None
+            done(record, tables)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _evaluate_after(_built: dict, task, kwargs: dict):
+    from fuelhm_bench.benchmark.leaderboard import evaluate_task
+
+    return evaluate_task(task, **kwargs)

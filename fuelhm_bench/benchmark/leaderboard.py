@@ -1,0 +1,376 @@
+"""Evaluate methods on scenarios and seeds, store every result, rank them (the leaderboard).
+
+``fuelhm-bench evaluate`` (one scenario) and ``fuelhm-bench leaderboard`` (a
+configuration file, ``leaderboard/methods.yaml``) both call :func:`run_board`:
+
+1. the **tasks**: one per (method setting, scenario, seed), each with its
+   content key (:func:`~fuelhm_bench.benchmark.store.evaluation_key`); the keys
+   already in the results store are skipped (``rerun=True`` forces them), so a
+   run killed at any moment and started again evaluates only what is missing;
+2. per (scenario, seed), the **data build** (published knowledge, training and
+   scored flights: :func:`~fuelhm_bench.benchmark.harness.prepare_evaluation`,
+   cached on disk) is done once and shared by every method;
+3. each **evaluation** runs the method sealed
+   (:func:`~fuelhm_bench.benchmark.harness.run_in_env`), scores it and returns a
+   record and its tables, which this process alone writes to the store;
+4. the **views** (:mod:`fuelhm_bench.benchmark.views`) are rebuilt from the store.
+
+Steps 2 and 3 run in this process (``jobs=1``), or as tasks on a Dask cluster:
+a local one with ``jobs`` worker processes, or an existing one at ``scheduler``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+from fuelhm_bench.errors import FuelHMError, ParameterError, ScenarioError
+
+__all__ = ["LeaderboardConfig", "LeaderboardEntry", "Task", "evaluate_task", "plan_tasks", "run_board"]
+
+
+@dataclass(frozen=True)
+class LeaderboardEntry:
+    """A method of the leaderboard: ``module:Class`` and its hyperparameters (sorted ``(name, value)`` pairs)."""
+
+    method: str
+    params: tuple = ()
+
+
+@dataclass(frozen=True)
+class LeaderboardConfig:
+    """What a leaderboard run evaluates.
+
+    Parameters
+    ----------
+    methods : tuple of LeaderboardEntry
+    scenarios : tuple of str
+        Shipped names or YAML paths.
+    seeds : tuple of int, default=(None,)
+        Master seeds (None: the scenario's own).
+    scale : float, default=1.0
+        Multiplies the number of test units, > 0.
+    timeout_s : float, default=900.0
+        Wall-time limit per method and scenario [s].
+    fidelity : {"physics", "surrogate"} or None, default=None
+        None: each scenario's own.
+    limits : dict, default={}
+        Other limits per method: ``cpu_s``, ``memory_mb``, ``log_kb``
+        (:class:`~fuelhm_bench.methods.sandbox.Limits`).
+    """
+
+    methods: tuple
+    scenarios: tuple
+    seeds: tuple = (None,)
+    scale: float = 1.0
+    timeout_s: float = 900.0
+    fidelity: str | None = None
+    limits: tuple = ()
+
+    @classmethod
+    def from_yaml(cls, path) -> LeaderboardConfig:
+        """Load ``leaderboard/methods.yaml`` (safe loader; errors name the file and field)."""
+        from fuelhm_bench.methods.sandbox import Limits
+
+        path = Path(path)
+        try:
+            data = yaml.safe_load(path.read_text())
+        except (OSError, yaml.YAMLError) as exc:
+            raise ScenarioError(f"{path}: cannot read the leaderboard file: {exc}") from None
+        if not isinstance(data, dict):
+            raise ScenarioError(f"{path}: a leaderboard file is a mapping with 'methods' and 'scenarios'.")
+        allowed = {"methods", "scenarios", "seeds", "scale", "timeout_s", "fidelity", "limits"}
+        for key in data:
+            if key not in allowed:
+                import difflib
+
+                close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
+                raise ScenarioError(f"{path}: unknown key '{key}'. Allowed: {', '.join(sorted(allowed))}."
+                                    + (f" Did you mean '{close[0]}'?" if close else ""))
+        methods = []
+        for i, m in enumerate(data.get("methods") or []):
+            if isinstance(m, str):
+                methods.append(LeaderboardEntry(m))
+            elif isinstance(m, dict) and isinstance(m.get("method"), str):
+                params = m.get("params") or {}
+                if not isinstance(params, dict):
+                    raise ScenarioError(f"{path}: methods[{i}].params must be a mapping. Got {params!r} instead.")
+                methods.append(LeaderboardEntry(m["method"], tuple(sorted(params.items()))))
+            else:
+                raise ScenarioError(f"{path}: methods[{i}] must be 'module:Class' or {{method: ..., params: ...}}. "
+                                    f"Got {m!r} instead.")
+        scenarios = data.get("scenarios") or []
+        if not methods or not scenarios or not isinstance(scenarios, list):
+            raise ScenarioError(f"{path}: 'methods' and 'scenarios' must both be non-empty lists.")
+        fidelity = data.get("fidelity")
+        if fidelity not in (None, "physics", "surrogate"):
+            raise ScenarioError(f"{path}: fidelity must be one of physics, surrogate or null. Got {fidelity!r} instead.")
+        seeds = data.get("seeds") or [None]
+        if not isinstance(seeds, list) or not all(s is None or (isinstance(s, int) and not isinstance(s, bool)
+                                                                and s >= 0) for s in seeds):
+            raise ScenarioError(f"{path}: seeds must be a list of integers >= 0 or null. Got {seeds!r} instead.")
+        scale = _number(path, "scale", data.get("scale", 1.0), positive=True)
+        timeout = _number(path, "timeout_s", data.get("timeout_s", 900.0), positive=True)
+        limits = data.get("limits") or {}
+        try:
+            Limits.coerce({**limits, "wall_s": timeout} if isinstance(limits, dict) else limits, f"{path}: limits")
+        except ParameterError as exc:
+            raise ScenarioError(str(exc)) from None
+        return cls(tuple(methods), tuple(str(s) for s in scenarios), tuple(seeds), scale, timeout, fidelity,
+                   tuple(sorted(limits.items())))
+
+
+def _number(path, field: str, value, *, positive: bool) -> float:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or (positive and value <= 0):
+        raise ScenarioError(f"{path}: {field} must be a finite number > 0. Got {value!r} instead.")
+    return float(value)
+
+
+# --------------------------------------------------------------------------- tasks
+@dataclass(frozen=True)
+class Task:
+    """One evaluation to run: a method setting on a scenario and seed, and its store key."""
+
+    key: str
+    method: str
+    params: tuple
+    shared_params: tuple
+    scenario: str
+    scenario_id: str
+    seed: int
+    fidelity: str | None
+    scale: float
+
+    @property
+    def params_dict(self) -> dict:
+        """The setting's own hyperparameters."""
+        return dict(self.params)
+
+    @property
+    def short(self) -> str:
+        """First 8 hex digits of the key of the setting (method + parameters), for folder names."""
+        import hashlib
+
+        from fuelhm_bench.benchmark.store import typed_json
+
+        blob = typed_json({"method": self.method, "params": dict(self.params), "shared": dict(self.shared_params)})
+        return hashlib.sha256(blob.encode()).hexdigest()[:8]
+
+
+def plan_tasks(config: LeaderboardConfig, shared_params: dict | None = None) -> list[Task]:
+    """Every (method setting, scenario, seed) of ``config`` with its content key."""
+    from fuelhm_bench import __version__
+    from fuelhm_bench.benchmark.store import evaluation_key
+    from fuelhm_bench.methods.sandbox import source_hash
+    from fuelhm_bench.scenarios import load_scenario
+
+    shared = tuple(sorted((shared_params or {}).items()))
+    hashes = {m.method: source_hash(m.method) for m in config.methods}
+    tasks = []
+    for scenario in config.scenarios:
+        sc = load_scenario(scenario)
+        for seed in config.seeds:
+            s = int(sc.seeds.master if seed is None else seed)
+            fidelity = config.fidelity or sc.fidelity
+            for m in config.methods:
+                params = {**dict(m.params), **({"shared": dict(shared)} if shared else {})}
+                key = evaluation_key(method=m.method, params=params, source_hash=hashes[m.method], scenario=sc.id,
+                                     seed=s, fidelity=fidelity, scale=config.scale, package_version=__version__)
+                tasks.append(Task(key, m.method, m.params, shared, scenario, sc.id, s, fidelity, config.scale))
+    return tasks
+
+
+def build_data(scenario: str, seed: int, fidelity: str | None, scale: float, cache_dir=None,
+               flight_minutes=None) -> dict:
+    """The data build of one (scenario, seed) (cached on disk); returns its flight counts."""
+    from fuelhm_bench.benchmark.harness import prepare_evaluation
+
+    ev = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale, cache_dir=cache_dir,
+                            flight_minutes=flight_minutes)
+    return {"test": ev.n_flights, "fit": len(ev.fit_indicators), "calibration": len(ev.calibration_indicators),
+            "fidelity": ev.fidelity}
+
+
+def evaluate_task(task: Task, *, limits: dict, method_seed: int = 0, cache_dir=None, flight_minutes=None,
+                  log_dir=None, deny=(), progress=None, evaluation=None) -> tuple[dict, dict]:
+    """Run one task sealed, score it; returns ``(record, tables)`` for the store (never raises for the method)."""
+    from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
+    from fuelhm_bench.benchmark.store import provenance
+    from fuelhm_bench.scoring import headline_kpis, robustness
+
+    if evaluation is None:
+        evaluation = prepare_evaluation(task.scenario, fidelity=task.fidelity, seed=task.seed, scale=task.scale,
+                                        cache_dir=cache_dir, flight_minutes=flight_minutes)
+    log_path = None
+    if log_dir is not None:
+        Path(log_dir).mkdir(parents=True, exist_ok=True)
+        log_path = Path(log_dir) / f"{task.key[:16]}.log"
+    common = {"random_state": method_seed, "limits": limits, "params": task.params_dict,
+              "shared_params": dict(task.shared_params), "deny": deny}
+    outcome = run_in_env(task.method, evaluation, log_path=log_path, progress=progress, **common)
+    tables: dict[str, pd.DataFrame] = {}
+    kpis: dict = {}
+    status, message = outcome.status, outcome.message
+    if outcome.ok:
+        try:
+            card = outcome.score()
+            kp = headline_kpis(card)
+            kp["cost_kusd"] = outcome.cost_kusd
+            tables = {"decisions": outcome.decisions, "labels": outcome.labels, "episodes": outcome.episodes,
+                      "healthy_scores": pd.DataFrame({"score": outcome.healthy_scores})}
+            if evaluation.nominal is not None:  # robustness: same method, same fleet without the drift
+                nom = run_in_env(task.method, evaluation.nominal, **common)
+                if nom.ok:
+                    kp["robustness"] = robustness(nom.score(), card)
+                    tables.update({"nominal_decisions": nom.decisions, "nominal_labels": nom.labels,
+                                   "nominal_healthy_scores": pd.DataFrame({"score": nom.healthy_scores})})
+                else:
+                    message = f"robustness not measured: nominal run {nom.status}: {nom.message}"
+            kpis = {k: (None if v != v else float(v)) for k, v in kp.items()}
+        except FuelHMError as exc:
+            status, message, tables = "invalid", f"{task.method}: its output cannot be scored: {exc}", {}
+    record = {"key": task.key, "method": task.method,
+              "params": {**task.params_dict, **({"shared": dict(task.shared_params)} if task.shared_params else {})},
+              "source_hash": "", "scenario": task.scenario_id, "seed": task.seed, "fidelity": evaluation.fidelity,
+              "scale": task.scale, "status": status, "message": message.splitlines()[0] if message else "",
+              "kpis": kpis, "method_params": outcome.params, "fit_seconds": outcome.fit_seconds,
+              "decide_seconds": outcome.decide_seconds, "seconds": outcome.seconds,
+              "provenance": {**provenance(), "sandbox": outcome.sandbox}}
+    record["package_version"] = record["provenance"]["package_version"]
+    from fuelhm_bench.methods.sandbox import source_hash
+
+    record["source_hash"] = source_hash(task.method)
+    return record, tables
+
+
+# --------------------------------------------------------------------------- the run
+def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params: dict | None = None,
+              rerun: bool = False, jobs: int = 1, scheduler: str | None = None, method_seed: int = 0,
+              cache_dir=None, flight_minutes=None, progress=None,
+              log: Callable[[str], object] = lambda s: print(s, file=sys.stderr)) -> pd.DataFrame:
+    """Evaluate every task of ``config`` missing from the store, then write the views; returns the board.
+
+    Parameters
+    ----------
+    config : LeaderboardConfig
+    out : path-like
+        Output folder (views; the store by default).
+    store_path : path-like, optional
+        The SQLite store; None: ``<out>/results.sqlite``.
+    shared_params : dict, optional
+        Hyperparameters applied to every method that has them.
+    rerun : bool, default=False
+        Evaluate stored keys again (their rows are replaced).
+    jobs : int, default=1
+        1: in this process; > 1: on a local Dask cluster with that many worker processes.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``); overrides ``jobs``.
+    method_seed : int, default=0
+        ``random_state`` passed to ``fit``.
+    cache_dir : path-like, optional
+        Cache of simulated products (must be shared by the workers of a remote cluster).
+    progress : callable, optional
+        ``progress(total, description)`` context manager with ``update(n)`` (e.g. :func:`tqdm.tqdm`).
+    log : callable
+        Receives one line per finished evaluation.
+    """
+    from fuelhm_bench.benchmark.store import ResultStore, default_store_path
+    from fuelhm_bench.benchmark.views import write_views
+
+    out = Path(out)
+    tasks = plan_tasks(config, shared_params)
+    limits = {**dict(config.limits), "wall_s": config.timeout_s}
+    store = ResultStore(store_path or default_store_path(out))
+    try:
+        stored = store.keys()
+        todo = [t for t in tasks if rerun or t.key not in stored]
+        if len(todo) < len(tasks):
+            log(f"{len(tasks) - len(todo)} of {len(tasks)} evaluations already in {store.path}; "
+                f"{len(todo)} to run" + ("" if not todo else "."))
+        kwargs = {"limits": limits, "method_seed": method_seed, "cache_dir": cache_dir,
+                  "flight_minutes": flight_minutes, "log_dir": str(out / "logs"),
+                  "deny": [str(out.resolve()), str(store.path.resolve().parent)]}
+
+        def done(record: dict, tables: dict) -> None:
+            store.put(record, tables)
+            first = record["message"]
+            score = record["kpis"].get("summary_score") if record["kpis"] else None
+            log(f"{record['scenario']} seed {record['seed']}: {record['method']} {dict(record['params']) or ''}: "
+                f"{record['status']}" + (f" (summary score {score:.3g})" if score is not None else "")
+                + (f": {first}" if first and record["status"] != "ok" else "")
+                + f" [{record['seconds']:.1f} s]")
+
+        if todo:
+            if scheduler is not None or jobs > 1:
+                from fuelhm_bench.benchmark.distributed import run_distributed
+
+                run_distributed(todo, kwargs, done, jobs=jobs, scheduler=scheduler)
+            else:
+                _run_local(todo, kwargs, done, progress)
+        return write_views(store, out, tasks)
+    finally:
+        store.close()
+
+
+def _run_local(todo: list[Task], kwargs: dict, done, progress) -> None:
+    from fuelhm_bench.benchmark.harness import prepare_evaluation
+
+    groups: dict[tuple, list[Task]] = {}
+    for t in todo:
+        groups.setdefault((t.scenario, t.seed, t.fidelity, t.scale), []).append(t)
+    for (scenario, seed, fidelity, scale), group in groups.items():
+        t0 = time.perf_counter()
+        evaluation = _prepare(prepare_evaluation, scenario, seed, fidelity, scale, kwargs, progress)
+        for task in group:
+            if progress is not None:
+                with progress(evaluation.n_flights, f"{task.method} on {task.scenario_id}") as bar:
+                    done(*evaluate_task(task, evaluation=evaluation, progress=bar.update, **kwargs))
+            else:
+                done(*evaluate_task(task, evaluation=evaluation, **kwargs))
+        del t0
+
+
+def _prepare(prepare_evaluation, scenario, seed, fidelity, scale, kwargs, progress):
+    common = {"fidelity": fidelity, "seed": seed, "scale": scale, "cache_dir": kwargs["cache_dir"],
+              "flight_minutes": kwargs["flight_minutes"]}
+    if progress is None:
+        return prepare_evaluation(scenario, **common)
+    with progress(0, f"data of {Path(str(scenario)).stem} (seed {seed})") as bar:
+        def grow(n: int) -> None:  # the total is unknown: the cache may answer
+            bar.total += n
+            bar.update(n)
+
+        return prepare_evaluation(scenario, progress=grow, **common)
+
+
+def evaluation_config(methods: list[str], scenario: str, *, seed=None, scale: float = 1.0, timeout_s: float = 600.0,
+                      fidelity=None, limits: dict | None = None) -> LeaderboardConfig:
+    """The configuration of ``fuelhm-bench evaluate``: some methods on one scenario and seed."""
+    return LeaderboardConfig(tuple(LeaderboardEntry(m) for m in methods), (scenario,), (seed,), float(scale),
+                             float(timeout_s), fidelity, tuple(sorted((limits or {}).items())))
+
+
+def check_shared_params(board: pd.DataFrame, shared: dict) -> None:
+    """Raise when a ``--param`` was taken by no method that started (a misspelt name)."""
+    if not shared or board.empty:
+        return
+    started = [p for p, s in zip(board["method_params"], board["status"])
+               if isinstance(p, dict) and (p or s == "ok")]
+    if not started:
+        return
+    unknown = [k for k in shared if not any(k in p for p in started)]
+    if unknown:
+        raise ParameterError(f"--param {', '.join(unknown)}: no evaluated method has such a hyperparameter.")
+
+
+__all__ += ["build_data", "check_shared_params", "evaluation_config"]
+del dataclasses

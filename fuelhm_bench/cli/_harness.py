@@ -1,0 +1,61 @@
+"""Options shared by ``evaluate`` and ``leaderboard``: limits, store, resume, Dask."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from fuelhm_bench.cli._common import non_negative_int, positive_float, positive_int
+from fuelhm_bench.errors import OutputPathError
+
+
+def add_run_options(p: argparse.ArgumentParser) -> None:
+    """Limits, results store, resume and Dask options."""
+    g = p.add_argument_group("limits per method (defaults: the config file's, else 900 s wall, CPU = wall, 4096 MiB)")
+    g.add_argument("--cpu-time", type=positive_float, default=None, metavar="S", help="CPU-time limit [s]")
+    g.add_argument("--memory", type=positive_float, default=None, metavar="MIB",
+                   help="address-space limit of the method's process [MiB] (>= 256)")
+    g.add_argument("--log-size", type=positive_float, default=None, metavar="KIB",
+                   help="cut each method's stdout/stderr log at this size [KiB] (default 1024)")
+    g = p.add_argument_group("results store and resume")
+    g.add_argument("--store", default=None, help="SQLite results store (default: <out>/results.sqlite)")
+    g.add_argument("--rerun", action="store_true", help="evaluate again entries already in the store")
+    g.add_argument("--force", action="store_true",
+                   help="write into a non-empty output folder that holds no results store")
+    g = p.add_argument_group("parallel and distributed runs (Dask)")
+    g.add_argument("--jobs", type=positive_int, default=1,
+                   help="worker processes of a local Dask cluster on the loopback interface (1: in this process)")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="address of an existing Dask scheduler (tcp://host:8786); see docs/methods.md")
+    g.add_argument("--method-seed", type=non_negative_int, default=0, help="random_state passed to fit")
+    g.add_argument("--cache-dir", default=None,
+                   help="cache of simulated knowledge and flights (default: $FUELHM_BENCH_CACHE or "
+                        "~/.cache/fuelhm-bench; shared by every worker of a remote cluster)")
+
+
+def limits_from(args, base: dict) -> dict:
+    """The config's limits with the command-line overrides."""
+    out = dict(base)
+    for opt, name in (("cpu_time", "cpu_s"), ("memory", "memory_mb"), ("log_size", "log_kb")):
+        value = getattr(args, opt)
+        if value is not None:
+            out[name] = value
+    if "memory_mb" in out and out["memory_mb"] < 256:
+        from fuelhm_bench.errors import ParameterError
+
+        raise ParameterError(f"--memory must be >= 256 MiB. Got {out['memory_mb']:g} instead.")
+    return out
+
+
+def check_results_dir(out: Path, store: str | None, force: bool) -> Path:
+    """The output folder: new, empty, or holding a results store (resume); anything else needs --force."""
+    from fuelhm_bench.benchmark.store import default_store_path
+    from fuelhm_bench.cli._common import check_output_dir
+
+    out = Path(out)
+    if out.is_dir() and any(out.iterdir()) and not force:
+        has_store = Path(store).is_file() if store else default_store_path(out).is_file()
+        if not has_store:
+            raise OutputPathError(f"{out} is not empty and holds no results store; refusing to write into it "
+                                  f"(pass --force, or choose another --out).")
+    return check_output_dir(out)

@@ -1,0 +1,243 @@
+"""The sealed process of :mod:`fuelhm_bench.methods.sandbox` (``python -m fuelhm_bench.methods._sealed_child FD``).
+
+It limits itself (CPU time, address space; Landlock on the file system, TCP and
+signals where the kernel offers it), builds the method, then answers the
+caller's operations one at a time with JSON. Tracebacks go to stderr (the
+method's log); replies carry one-line messages.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import resource
+import sys
+import time
+import traceback
+
+# --------------------------------------------------------------------------- Landlock (linux/landlock.h)
+_SYS_CREATE, _SYS_ADD_RULE, _SYS_RESTRICT = 444, 445, 446  # same numbers on x86_64 and aarch64
+_READ = (1 << 0) | (1 << 2) | (1 << 3)  # EXECUTE, READ_FILE, READ_DIR
+_FILE_RIGHTS = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 14) | (1 << 15)
+
+
+class _RulesetAttr(ctypes.Structure):
+    _fields_ = [("handled_access_fs", ctypes.c_uint64), ("handled_access_net", ctypes.c_uint64),
+                ("scoped", ctypes.c_uint64)]
+
+
+class _PathBeneath(ctypes.Structure):
+    _pack_ = 1
+    _fields_ = [("allowed_access", ctypes.c_uint64), ("parent_fd", ctypes.c_int32)]
+
+
+def _landlock(readable: list[str], writable: list[str]) -> str:
+    """Restrict this process; returns a description of the sandbox applied."""
+    if not sys.platform.startswith("linux"):
+        return "no file-system restriction (not Linux)"
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        abi = libc.syscall(_SYS_CREATE, None, ctypes.c_size_t(0), ctypes.c_uint32(1))
+    except (OSError, AttributeError):
+        abi = -1
+    if abi < 1:
+        return "no file-system restriction (Landlock unavailable)"
+    handled = (1 << 13) - 1
+    if abi >= 2:
+        handled |= 1 << 13
+    if abi >= 3:
+        handled |= 1 << 14
+    if abi >= 5:
+        handled |= 1 << 15
+    attr = _RulesetAttr(handled, 0b11 if abi >= 4 else 0, 0b11 if abi >= 6 else 0)
+    size = 24 if abi >= 6 else (16 if abi >= 4 else 8)
+    fd = libc.syscall(_SYS_CREATE, ctypes.byref(attr), ctypes.c_size_t(size), ctypes.c_uint32(0))
+    if fd < 0:
+        return "no file-system restriction (Landlock ruleset refused)"
+    try:
+        for paths, rights in ((readable, _READ), (writable, handled)):
+            for p in paths:
+                try:
+                    pfd = os.open(p, os.O_PATH | os.O_CLOEXEC)
+                except OSError:
+                    continue
+                try:
+                    allowed = rights & handled
+                    if not os.path.isdir(p):
+                        allowed &= _FILE_RIGHTS
+                    rule = _PathBeneath(allowed, pfd)
+                    libc.syscall(_SYS_ADD_RULE, ctypes.c_int(fd), ctypes.c_int(1), ctypes.byref(rule),
+                                 ctypes.c_uint32(0))
+                finally:
+                    os.close(pfd)
+        if libc.prctl(38, 1, 0, 0, 0) != 0:  # PR_SET_NO_NEW_PRIVS
+            return "no file-system restriction (no_new_privs refused)"
+        if libc.syscall(_SYS_RESTRICT, ctypes.c_int(fd), ctypes.c_uint32(0)) != 0:
+            return "no file-system restriction (Landlock restrict_self refused)"
+    finally:
+        os.close(fd)
+    extra = (", TCP" if abi >= 4 else "") + (", signals" if abi >= 6 else "")
+    return f"landlock abi {abi}: file system{extra}"
+
+
+# --------------------------------------------------------------------------- JSON helpers
+def _json_value(v):
+    import numpy as np
+
+    if v is None or isinstance(v, (bool, str)):
+        return v
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v)
+    if isinstance(v, (list, tuple)):
+        return [_json_value(x) for x in v]
+    if isinstance(v, dict):
+        return {str(k): _json_value(x) for k, x in v.items()}
+    return repr(v)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+    return text[:400]
+
+
+class _Child:
+    def __init__(self, conn):
+        self.conn = conn
+        self.method = None
+        self._index = {}
+
+    def reply(self, **data) -> None:
+        data.setdefault("status", "ok")
+        self.conn.send_bytes(json.dumps(data, allow_nan=True).encode("utf-8"))
+
+    # ------------------------------------------------------------------ operations
+    def op_start(self, p: dict) -> None:
+        import pickle
+
+        cpu = max(1, int(p["cpu_s"] + 0.999))
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 5))
+        mem = int(p["memory_bytes"])
+        resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        sys.path[:] = [x for x in p["sys_path"]] + [x for x in sys.path if x not in p["sys_path"]]
+        import numpy  # noqa: F401 - imported before the sandbox closes the file system
+        import pandas  # noqa: F401
+
+        import fuelhm_bench.methods  # noqa: F401
+        from fuelhm_bench.methods.loading import load_method
+
+        sandbox = _landlock(p["readable"] + ["/usr", "/lib", "/lib64", "/etc", "/proc", "/sys", "/dev/urandom",
+                                             "/dev/null", "/dev/zero"],
+                            [p["scratch"], "/dev/null"])
+        method = p["method"]
+        if isinstance(method, str):
+            self.method = load_method(method, p["params"])
+        else:
+            self.method = method if not isinstance(method, bytes) else pickle.loads(method)
+            cls = type(self.method)
+            if cls.__module__ not in sys.modules:  # a class built in memory by the caller: same module here
+                import types
+
+                module = types.ModuleType(cls.__module__)
+                setattr(module, cls.__qualname__.split(".")[0], cls)
+                sys.modules[cls.__module__] = module
+        get_params = getattr(self.method, "get_params", None)
+        params = get_params() if callable(get_params) else {}
+        shared = {k: v for k, v in p["shared_params"].items() if k in params}
+        if shared:
+            self.method.set_params(**shared)
+            params = get_params()
+        self.reply(repr=repr(self.method)[:2000], params=_json_value(params),
+                   shared_applied=sorted(shared), sandbox=sandbox)
+
+    def op_fit(self, p: dict) -> None:
+        t0, c0 = time.perf_counter(), time.process_time()
+        self.method.fit(p["table"], knowledge=p["knowledge"], random_state=p["random_state"])
+        self.reply(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
+
+    def op_scores(self, p: dict) -> None:
+        from fuelhm_bench.methods.base import run_table
+
+        scores = run_table(self.method, p["table"])["score"].to_numpy(dtype=float)
+        self.reply(scores=[float(s) for s in scores])
+
+    def op_start_unit(self, p: dict) -> None:
+        self.method.start_unit(p["unit_id"])
+        self.reply()
+
+    def op_decide(self, p: dict) -> None:
+        from fuelhm_bench.methods.decision import Decision, decision_problem
+
+        if "row_values" in p:
+            import pandas as pd
+
+            index = self._index.get(p["row_index"])
+            if index is None:
+                index = self._index[p["row_index"]] = pd.Index(p["row_index"])
+            row = pd.Series(p["row_values"], index=index, dtype=object)
+        else:
+            row = p["row"]
+        d = self.method.decide(row)
+        if not isinstance(d, Decision):
+            problem = decision_problem(d) or f"expected a Decision, got {type(d).__name__}"
+            self.reply(status="invalid", message=problem)
+            return
+        self.reply(score=float(d.score), alarm=bool(d.alarm), guilt=[float(g) for g in d.guilt])
+
+    def op_check(self, p: dict) -> None:
+        from fuelhm_bench.methods.checks import _run_one_check
+
+        self.reply(**_run_one_check(self.method, p["name"], p["data"]))
+
+    # ------------------------------------------------------------------ loop
+    def serve(self) -> None:
+        while True:
+            try:
+                op, payload = self.conn.recv()
+            except (EOFError, OSError):
+                return
+            handler = getattr(self, f"op_{op}", None)
+            try:
+                if handler is None:
+                    self.reply(status="error", message=f"unknown operation {op!r}")
+                else:
+                    handler(payload)
+            except MemoryError as exc:
+                traceback.print_exc()
+                self.reply(status="memory", message=f"out of memory (address-space limit): {_one_line(exc)}")
+            except SystemExit as exc:
+                self.reply(status="error", message=f"SystemExit({exc.code!r}) raised")
+            except BaseException as exc:  # noqa: BLE001 - the method is untrusted code
+                traceback.print_exc()
+                from fuelhm_bench.errors import MethodError
+
+                status = "invalid" if isinstance(exc, MethodError) and op in ("decide", "scores") else "error"
+                try:
+                    self.reply(status=status, message=_one_line(exc))
+                except (OSError, ValueError):
+                    return
+            sys.stdout.flush()
+            sys.stderr.flush()
+
+
+def main(argv: list[str]) -> None:
+    from multiprocessing.connection import Connection
+
+    conn = Connection(int(argv[1]))
+    import numpy  # noqa: F401 - the harness's own imports, before the method's clock starts
+    import pandas  # noqa: F401
+
+    import fuelhm_bench.methods  # noqa: F401
+    import fuelhm_bench.methods.loading  # noqa: F401
+
+    child = _Child(conn)
+    child.reply(status="ready")
+    child.serve()
+    os._exit(0)
+
+
+if __name__ == "__main__":
+    main(sys.argv)

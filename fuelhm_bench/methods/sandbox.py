@@ -1,0 +1,462 @@
+"""Run an untrusted method in a sealed process: its own interpreter, limits, a log, no ground truth.
+
+The isolation model (also in docs/methods.md):
+
+* **Own process, fresh interpreter.** The method runs in a new Python process
+  (``python -m fuelhm_bench.methods._sealed_child``, not a fork), in its own
+  session and process group, with the working directory and ``HOME`` set to an
+  empty scratch directory and a scrubbed environment. Nothing of the caller's
+  memory (environment, fault schedule, labels) exists in it.
+* **Only what a method may see, over a pipe.** The caller sends the healthy
+  training tables, the published knowledge and then one observation row per
+  flight (the message carries a ``payload`` mapping so that raw samples can be
+  added later); the child answers with plain JSON (never pickle), which the
+  caller validates.
+* **File system.** Where the kernel offers Landlock (Linux >= 5.13, no
+  privilege needed) the child restricts itself before importing the method: it
+  may read the Python installation, the directories on its import path that do
+  not contain a denied path (the simulation cache, the output folder), the
+  method's own source directory and system directories; it may write only its
+  scratch directory; TCP ``bind``/``connect`` and signals to processes outside
+  its sandbox are refused (Landlock ABI >= 4 and >= 6). Without Landlock the
+  child still never holds ground truth in memory, but the file system is not
+  restricted (:attr:`SealedMethod.sandbox` says which).
+* **Limits.** Wall time (enforced by the caller), CPU time (``RLIMIT_CPU``) and
+  address space (``RLIMIT_AS``) per method (:class:`Limits`). Stdout and stderr
+  go to a log file cut at ``log_kb``. When the run ends, the whole process
+  group is killed: no orphans.
+
+Every failure is reported as a :class:`SealedFailure` with a ``status``
+(``"error"``, ``"crash"``, ``"timeout"``, ``"cpu_limit"``, ``"memory"``,
+``"invalid"``) and a one-line ``message`` naming the phase.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fuelhm_bench.errors import ParameterError
+
+__all__ = ["Limits", "SealedFailure", "SealedMethod", "locate_module", "source_hash"]
+
+_MAX_REPLY = 256 * 1024 * 1024
+_STARTUP_S = 300.0  # start-up of the interpreter and the harness's own imports (not the method's time)
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Resource limits of one sealed method run.
+
+    Parameters
+    ----------
+    wall_s : float, default=900.0
+        Wall-clock time of the whole run (start, fit, every decision) [s], > 0.
+    cpu_s : float or None, default=None
+        CPU time of the method's process [s], > 0; None: ``wall_s``.
+    memory_mb : float, default=4096.0
+        Address-space limit of the method's process [MiB], >= 256.
+    log_kb : float, default=1024.0
+        Size at which the method's stdout/stderr log is cut [KiB], > 0.
+    """
+
+    wall_s: float = 900.0
+    cpu_s: float | None = None
+    memory_mb: float = 4096.0
+    log_kb: float = 1024.0
+
+    def __post_init__(self) -> None:
+        for name, low in (("wall_s", 0.0), ("cpu_s", 0.0), ("memory_mb", 256.0), ("log_kb", 0.0)):
+            value = getattr(self, name)
+            if name == "cpu_s" and value is None:
+                continue
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            if not ok or value < low or (low == 0.0 and value <= 0):
+                bound = f">= {low:g}" if low else "> 0"
+                raise ParameterError(f"The '{name}' parameter of Limits must be a finite number {bound}. "
+                                     f"Got {value!r} instead.")
+
+    @property
+    def cpu_limit_s(self) -> float:
+        """The effective CPU-time limit [s]."""
+        return float(self.wall_s if self.cpu_s is None else self.cpu_s)
+
+    @classmethod
+    def coerce(cls, value: Any, owner: str = "limits") -> Limits:
+        """A :class:`Limits` from None, a Limits or a mapping of its fields (errors name ``owner``)."""
+        if value is None:
+            return cls()
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, dict):
+            unknown = sorted(set(value) - {"wall_s", "cpu_s", "memory_mb", "log_kb"})
+            if unknown:
+                raise ParameterError(f"{owner}: unknown limit '{unknown[0]}'. Allowed: wall_s, cpu_s, memory_mb, "
+                                     f"log_kb.")
+            try:
+                return cls(**{k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v)
+                              for k, v in value.items()})
+            except ParameterError as exc:
+                raise ParameterError(f"{owner}: {exc}") from None
+        raise ParameterError(f"{owner} must be a mapping of wall_s, cpu_s, memory_mb, log_kb. Got {value!r} instead.")
+
+
+class SealedFailure(Exception):
+    """A sealed method failed; ``status`` says how and the message (one line) where."""
+
+    def __init__(self, status: str, message: str):
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+def locate_module(name: str, path: list[str] | None = None) -> Path | None:
+    """File of module ``name`` (``a.b.c``) *without executing any code*.
+
+    The top-level name is looked up by every import finder (installed, editable
+    or on the path; finding a spec runs no module code), the rest through the
+    package directories.
+    """
+    import importlib.util
+    from importlib.machinery import PathFinder
+
+    search = list(sys.path if path is None else path)
+    if os.getcwd() not in search:
+        search.insert(0, os.getcwd())
+    parts = name.split(".")
+    try:
+        spec = PathFinder.find_spec(parts[0], search) or importlib.util.find_spec(parts[0])
+    except (ImportError, ValueError):
+        return None
+    for i in range(1, len(parts)):
+        if spec is None or not spec.submodule_search_locations:
+            return None
+        spec = PathFinder.find_spec(".".join(parts[:i + 1]), list(spec.submodule_search_locations))
+    if spec is None or spec.origin in (None, "built-in", "frozen"):
+        return None
+    return Path(spec.origin)
+
+
+def _package_root(name: str) -> Path | None:
+    origin = locate_module(name.split(".")[0])
+    if origin is None:
+        return None
+    return origin.parent if origin.name == "__init__.py" else origin
+
+
+def source_hash(entry_point: str) -> str:
+    """SHA-256 of the source file of the module of ``module:Class`` ('' when it cannot be found)."""
+    import hashlib
+
+    origin = locate_module(entry_point.partition(":")[0])
+    if origin is None or not origin.is_file():
+        return ""
+    return hashlib.sha256(origin.read_bytes()).hexdigest()
+
+
+def _python_roots() -> list[str]:
+    roots = {sys.prefix, sys.base_prefix, sys.exec_prefix, sys.base_exec_prefix,
+             str(Path(sys.executable).resolve().parent)}
+    import sysconfig
+
+    for key in ("stdlib", "platstdlib", "purelib", "platlib"):
+        p = sysconfig.get_paths().get(key)
+        if p:
+            roots.add(p)
+    return sorted(roots)
+
+
+class _LogPump(threading.Thread):
+    """Copy the child's stdout/stderr to a file, cut at ``limit`` bytes (the rest is drained and dropped)."""
+
+    def __init__(self, stream, path: Path | None, limit: int):
+        super().__init__(daemon=True)
+        self.stream, self.path, self.limit = stream, path, limit
+        self.dropped = 0
+
+    def run(self) -> None:
+        written = 0
+        sink = open(self.path, "wb") if self.path is not None else None
+        try:
+            while True:
+                chunk = self.stream.read1(65536) if hasattr(self.stream, "read1") else self.stream.read(65536)
+                if not chunk:
+                    break
+                if sink is not None and written < self.limit:
+                    part = chunk[: self.limit - written]
+                    sink.write(part)
+                    written += len(part)
+                    self.dropped += len(chunk) - len(part)
+                else:
+                    self.dropped += len(chunk)
+        except (OSError, ValueError):
+            pass
+        finally:
+            if sink is not None:
+                if self.dropped:
+                    sink.write(f"\n[log cut at {self.limit} bytes; {self.dropped} more bytes dropped]\n".encode())
+                sink.close()
+
+
+class SealedMethod:
+    """A method running in its own sealed process; the caller drives it call by call.
+
+    Parameters
+    ----------
+    method : str or BaseMethod
+        ``"module:Class"`` (imported only in the sealed process) or an unfitted
+        instance (sent by pickle: its class is re-imported there).
+    params : dict, optional
+        Hyperparameters of ``module:Class`` (typed values).
+    shared_params : dict, optional
+        Hyperparameters applied when the method has them.
+    limits : Limits or dict, optional
+        Resource limits.
+    log_path : path-like, optional
+        Where the method's stdout/stderr go (cut at ``limits.log_kb``); None: dropped.
+    deny : sequence of path-like, default=()
+        Paths the method must not read (simulation cache, output folder): an
+        import-path directory that contains one is not made readable.
+
+    Examples
+    --------
+    >>> with SealedMethod("fuelhm_bench.methods:NullMethod") as m:  # doctest: +SKIP
+    ...     m.fit(table)
+    """
+
+    def __init__(self, method: Any, *, params: dict | None = None, shared_params: dict | None = None,
+                 limits: Limits | dict | None = None, log_path=None, deny=()):
+        self.method = method
+        self.params = dict(params or {})
+        self.shared_params = dict(shared_params or {})
+        self.limits = Limits.coerce(limits, "limits")
+        self.log_path = None if log_path is None else Path(log_path)
+        self.deny = [str(Path(d).resolve()) for d in deny if d]
+        self.name = method if isinstance(method, str) else type(method).__name__
+        self.info: dict = {}
+        self.sandbox = "not started"
+        self._proc = None
+        self._conn = None
+        self._pump = None
+        self._scratch = None
+        self._deadline = math.inf
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> dict:
+        """Start the process, import and build the method; returns ``{"repr", "params", "sandbox"}``."""
+        from multiprocessing.connection import Connection
+
+        self._scratch = tempfile.TemporaryDirectory(prefix="fuelhm-sealed-")
+        scratch = self._scratch.name
+        parent_sock, child_sock = socket.socketpair()
+        env = {k: v for k, v in os.environ.items()
+               if k in ("PATH", "LANG", "LC_ALL", "LC_CTYPE", "TZ", "SYSTEMROOT")}
+        path = [os.path.abspath(p) for p in ([os.getcwd()] + sys.path) if p]
+        env.update({"HOME": scratch, "TMPDIR": scratch, "PYTHONPATH": os.pathsep.join(dict.fromkeys(path)),
+                    "PYTHONDONTWRITEBYTECODE": "1", "PYTHONHASHSEED": "0", "MPLBACKEND": "Agg",
+                    "MPLCONFIGDIR": scratch, "NUMBA_CACHE_DIR": scratch,
+                    "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+        self._deadline = time.monotonic() + _STARTUP_S  # the interpreter and the harness's imports
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "fuelhm_bench.methods._sealed_child", str(child_sock.fileno())],
+            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=scratch, env=env,
+            pass_fds=(child_sock.fileno(),), start_new_session=True, close_fds=True)
+        child_sock.close()
+        self._conn = Connection(parent_sock.detach())
+        self._pump = _LogPump(self._proc.stdout, self.log_path, int(self.limits.log_kb * 1024))
+        self._pump.start()
+        readable = list(_python_roots())
+        module = self.method.partition(":")[0] if isinstance(self.method, str) else type(self.method).__module__
+        for name in (module, "fuelhm_bench"):
+            root = _package_root(name)
+            if root is not None:
+                readable.append(str(root))
+        readable += [p for p in path if os.path.isdir(p) and not any(self._contains(p, d) for d in self.deny)]
+        readable = [p for p in dict.fromkeys(readable) if not any(self._contains(p, d) for d in self.deny)]
+        method = self.method
+        if not isinstance(method, str):  # by value when its class is not importable (a notebook, a script)
+            try:
+                import cloudpickle
+
+                module = sys.modules.get(type(method).__module__)
+                by_value = (module is not None and module.__name__ != "__main__"
+                            and locate_module(module.__name__) is None)  # built in memory: no file to import
+                if by_value:
+                    cloudpickle.register_pickle_by_value(module)
+                try:
+                    method = cloudpickle.dumps(method)
+                finally:
+                    if by_value:
+                        cloudpickle.unregister_pickle_by_value(module)
+            except ImportError:
+                import pickle
+
+                method = pickle.dumps(method)
+        ready = self._receive("start-up of the sealed process")
+        if ready.get("status") != "ready":
+            self.close()
+            raise SealedFailure("crash", f"{self.name}: the sealed process did not start.")
+        self._deadline = time.monotonic() + self.limits.wall_s  # the method's clock starts here
+        init = {"method": method, "params": self.params, "shared_params": self.shared_params,
+                "cpu_s": self.limits.cpu_limit_s, "memory_bytes": int(self.limits.memory_mb * 1024 * 1024),
+                "readable": readable, "scratch": scratch, "sys_path": path}
+        self.info = self._call("start", init, phase="import and construction")
+        self.sandbox = self.info.get("sandbox", "")
+        return self.info
+
+    @staticmethod
+    def _contains(root: str, path: str) -> bool:
+        root = str(Path(root).resolve())
+        return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+
+    def close(self) -> None:
+        """Kill the method's whole process group and remove its scratch directory."""
+        if self._proc is not None:
+            try:
+                os.killpg(self._proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+            try:
+                self._proc.wait(5)
+            except subprocess.TimeoutExpired:
+                pass
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+        if self._pump is not None:
+            self._pump.join(5)
+        if self._scratch is not None:
+            self._scratch.cleanup()
+            self._scratch = None
+
+    def __enter__(self) -> SealedMethod:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def pid(self) -> int | None:
+        """Process id (= process group id) of the sealed process."""
+        return None if self._proc is None else self._proc.pid
+
+    # ------------------------------------------------------------------ the calls
+    def fit(self, healthy_indicators, *, knowledge=None, random_state=None) -> dict:
+        """``method.fit`` in the sealed process; returns ``{"wall_s", "cpu_s"}`` measured there."""
+        return self._call("fit", {"table": healthy_indicators, "knowledge": knowledge, "random_state": random_state},
+                          phase="fit")
+
+    def scores(self, indicators) -> np.ndarray:
+        """Scores of ``run_table(method, indicators)`` (unit by unit, causal), validated finite floats."""
+        reply = self._call("scores", {"table": indicators}, phase="calibration scores")
+        values = reply.get("scores")
+        if not isinstance(values, list) or len(values) != len(indicators):
+            raise SealedFailure("invalid", f"{self.name} returned {len(values) if isinstance(values, list) else 0} "
+                                           f"calibration scores for {len(indicators)} healthy flights.")
+        try:
+            return np.asarray(values, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SealedFailure("invalid", f"{self.name} returned non-numeric calibration scores.") from None
+
+    def start_unit(self, unit_id) -> None:
+        """``method.start_unit`` in the sealed process."""
+        self._call("start_unit", {"unit_id": unit_id}, phase=f"start_unit({unit_id!r})")
+
+    def decide(self, row, *, raw=None, where: str = "decide"):
+        """``method.decide(row)``; returns a validated :class:`~fuelhm_bench.methods.Decision`.
+
+        ``raw`` (reserved): the flight's raw samples, for methods that declare they need them.
+        """
+        from fuelhm_bench.methods.decision import Decision, decision_problem
+
+        if hasattr(row, "index") and hasattr(row, "tolist"):  # a Series travels as plain tuples (cheap to pickle)
+            payload = {"row_index": tuple(row.index), "row_values": tuple(row.tolist())}
+        else:
+            payload = {"row": row}
+        if raw is not None:
+            payload["raw"] = raw
+        reply = self._call("decide", payload, phase=where)
+        try:
+            decision = Decision(score=float(reply["score"]), alarm=bool(reply["alarm"]),
+                                guilt=np.asarray(reply["guilt"], dtype=np.float64))
+        except Exception as exc:  # noqa: BLE001 - the reply is untrusted
+            raise SealedFailure("invalid", f"{self.name} returned an invalid decision in {where}: "
+                                           f"{type(exc).__name__}: {exc}") from None
+        problem = decision_problem(decision)
+        if problem is not None:
+            raise SealedFailure("invalid", f"{self.name} returned an invalid decision in {where}: {problem}.")
+        return decision
+
+    def call(self, op: str, payload: dict, *, phase: str, timeout_s: float | None = None) -> dict:
+        """A custom operation of the child (the conformance checks); ``timeout_s`` restarts the clock."""
+        if timeout_s is not None:
+            self._deadline = time.monotonic() + float(timeout_s)
+        return self._call(op, payload, phase=phase)
+
+    def _call(self, op: str, payload: dict, *, phase: str) -> dict:
+        if self._proc is None or self._conn is None:
+            raise SealedFailure("error", f"{self.name}: the sealed process is not running ({phase}).")
+        try:
+            self._conn.send((op, payload))
+        except (BrokenPipeError, ConnectionResetError, OSError):
+            raise self._dead(phase) from None
+        reply = self._receive(phase)
+        if reply.get("status", "ok") != "ok":
+            status = reply.get("status") if reply.get("status") in ("error", "memory", "invalid") else "error"
+            message = str(reply.get("message", "")).splitlines()[0][:500] if reply.get("message") else ""
+            raise SealedFailure(status, f"{self.name} failed in {phase}: {message}")
+        return reply
+
+    def _receive(self, phase: str) -> dict:
+        remaining = self._deadline - time.monotonic()
+        try:
+            ready = remaining > 0 and self._conn.poll(remaining)
+        except (OSError, EOFError):
+            ready = True
+        if not ready:
+            self.close()
+            limit = self.limits.wall_s if phase != "start-up of the sealed process" else _STARTUP_S
+            raise SealedFailure("timeout", f"{self.name} did not finish within {limit:g} s "
+                                           f"(stopped during {phase}).")
+        try:
+            data = self._conn.recv_bytes(_MAX_REPLY)
+        except (EOFError, OSError):
+            raise self._dead(phase) from None
+        try:
+            reply = json.loads(data.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError):
+            raise SealedFailure("invalid", f"{self.name}: unreadable reply during {phase}.") from None
+        if not isinstance(reply, dict):
+            raise SealedFailure("invalid", f"{self.name}: unreadable reply during {phase}.")
+        return reply
+
+    def _dead(self, phase: str) -> SealedFailure:
+        code = None
+        try:
+            code = self._proc.wait(5)
+        except subprocess.TimeoutExpired:
+            pass
+        self.close()
+        if code is not None and code < 0:
+            sig = -code
+            name = signal.Signals(sig).name if sig in signal.Signals._value2member_map_ else str(sig)
+            if sig == signal.SIGXCPU:
+                return SealedFailure("cpu_limit", f"{self.name} exceeded its CPU-time limit of "
+                                                  f"{self.limits.cpu_limit_s:g} s during {phase}.")
+            return SealedFailure("crash", f"{self.name} was killed by signal {name} during {phase}.")
+        return SealedFailure("crash", f"{self.name} exited (exit code {code}) during {phase} "
+                                      f"without reporting (os._exit or a crash).")

@@ -1,0 +1,193 @@
+"""Misbehaving and spying submissions for the sealed-harness tests (a light module: the sealed process imports it).
+
+Each class is what an outside researcher (or an attacker) might submit; the harness must turn every one
+into a row with a status and a one-line message, and the spies must find no ground truth.
+"""
+
+from __future__ import annotations
+
+import gc
+import inspect
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fuelhm_bench.methods import BaseMethod, Decision
+from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+
+class IdleCurrent(BaseMethod):
+    """Alarms when I0 leaves its healthy band; blames null-bias drift."""
+
+    def __init__(self, *, a=4.0):
+        self.a = a
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        self.mu_, self.sd_ = healthy["I0"].mean(), healthy["I0"].std()
+
+    def _decide(self, row):
+        z = 0.0 if np.isnan(row["I0"]) else abs(row["I0"] - self.mu_) / self.sd_
+        return Decision(score=z, alarm=z > self.a, guilt=np.eye(7)[1] if z > self.a else np.zeros(7))
+
+
+class Raises(IdleCurrent):
+    def _decide(self, row):
+        if row["flight_index"] == 3:
+            raise RuntimeError("boom at flight 3")
+        return super()._decide(row)
+
+
+class Hangs(IdleCurrent):
+    def _decide(self, row):
+        time.sleep(3600)
+
+
+class NaNScore(IdleCurrent):
+    def _decide(self, row):
+        return Decision(score=float("nan"), alarm=False)
+
+
+class NotADecision:
+    """Duck-typed method (no BaseMethod) whose decide returns a float."""
+
+    def fit(self, healthy, *, knowledge=None, random_state=None):
+        return self
+
+    def start_unit(self, unit_id):
+        pass
+
+    def decide(self, row):
+        return 0.5
+
+
+class Exits(IdleCurrent):
+    def _decide(self, row):
+        os._exit(7)
+
+
+class SysExit(IdleCurrent):
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        sys.exit(0)
+
+
+class Segfaults(IdleCurrent):
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        os.kill(os.getpid(), signal.SIGSEGV)
+
+
+class RaisesInInit(IdleCurrent):
+    def __init__(self, *, a=4.0):
+        raise ValueError("cannot construct")
+
+
+class Spins(IdleCurrent):
+    """Burns CPU in fit."""
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        x = 0
+        while True:
+            x += 1
+
+
+class Hogs(IdleCurrent):
+    """Allocates 3 GiB in fit."""
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        self.block_ = np.ones(3 * 1024 ** 3 // 8)
+
+
+class Chatty(IdleCurrent):
+    """Prints megabytes and starts a child that would outlive the run."""
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        super()._fit(healthy, knowledge=knowledge, raw_flights=raw_flights, rng=rng)
+        proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+        self.orphan_ = proc.pid
+        print(f"ORPHAN {proc.pid}", file=sys.stderr, flush=True)
+        sys.stdout.write("x" * 4_000_000)
+        sys.stdout.flush()
+
+
+class Peeks(IdleCurrent):
+    """Fails unless every row holds exactly the observation columns."""
+
+    def _decide(self, row):
+        allowed = {"flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *(f"{n}_valid" for n in INDICATOR_NAMES)}
+        if set(row.index) != allowed:
+            raise AssertionError(f"unexpected columns {set(row.index) ^ allowed}")
+        return super()._decide(row)
+
+
+_GROUND_TRUTH = ("episode_truth", "schedule", "onset_", "intensity_", "ActuationLoopEnv", "UnitSchedule",
+                 "max_intensity")
+
+
+def _hunt(start_dirs) -> list[str]:
+    """Everything a submission can reach that smells of ground truth."""
+    found = []
+    frame = inspect.currentframe()
+    while frame is not None:  # the call stack, every local and global of every frame
+        for scope in (frame.f_locals, frame.f_globals):
+            for name, value in list(scope.items()):
+                if type(value).__name__ in ("ActuationLoopEnv", "EnvEvaluation", "UnitSchedule"):
+                    found.append(f"frame {frame.f_code.co_name}: {name}")
+        frame = frame.f_back
+    for obj in gc.get_objects():  # every object of the process
+        kind = type(obj).__name__
+        if kind in ("ActuationLoopEnv", "EnvEvaluation", "UnitSchedule", "SurrogateModel"):
+            found.append(f"gc: {kind}")
+        elif kind == "DataFrame" and any(str(c).startswith(("onset_", "intensity_", "max_intensity_"))
+                                         for c in getattr(obj, "columns", [])):
+            found.append("gc: a labels table")
+    for module in ("fuelhm_bench.envs.actuation_loop", "fuelhm_bench.benchmark.harness"):
+        if module in sys.modules:
+            found.append(f"module {module} is loaded")
+    for root in start_dirs:  # files: the cache, the output folder, the parent's working directory, /tmp
+        try:
+            for dirpath, _dirs, files in os.walk(root):
+                for f in files:
+                    if f.endswith((".parquet", ".sqlite", ".json", ".csv")):
+                        try:
+                            text = Path(dirpath, f).read_bytes()[:2_000_000]
+                        except OSError:
+                            continue
+                        if b"onset_" in text or b"intensity_" in text:
+                            found.append(f"file {dirpath}/{f}")
+        except OSError:
+            continue
+    try:  # the parent process's memory
+        with open(f"/proc/{os.getppid()}/mem", "rb") as mem:
+            mem.read(1)
+        found.append("parent memory readable")
+    except OSError:
+        pass
+    return found
+
+
+class Spy(IdleCurrent):
+    """Walks its call stack and the heap, reads files and the parent's memory, looking for the ground truth.
+
+    It alarms on every flight if it finds anything, and stores what it found in its guilt (so the
+    harness can see it): a clean run is all-zero guilt with no alarm.
+    """
+
+    def __init__(self, *, a=4.0, dirs=()):
+        self.a = a
+        self.dirs = dirs
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        super()._fit(healthy, knowledge=knowledge, raw_flights=raw_flights, rng=rng)
+        self.found_ = _hunt(self.dirs)
+        print("SPY FOUND:", self.found_, file=sys.stderr, flush=True)
+
+    def _decide(self, row):
+        if row["flight_index"] == 0:
+            self.found_ += _hunt(())
+        if self.found_:
+            return Decision(score=float(len(self.found_)), alarm=True, guilt=np.eye(7)[0])
+        return Decision(score=0.0, alarm=False)

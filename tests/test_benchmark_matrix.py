@@ -1,0 +1,67 @@
+"""Every shipped baseline runs on every shipped scenario (small scale: short flights, few scored units).
+
+The training fleet keeps each scenario's own number of units and flights when it is small (that is the
+point of ``low_data``), shorter flights keep the simulation cheap. The methods are fitted, scored on the
+calibration units and decide on the scored observations in this process (the sealing itself is tested
+in ``test_benchmark_sealed.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import fuelhm_baselines
+from fuelhm_bench.benchmark.harness import action_from_decision, observation_row, prepare_evaluation
+from fuelhm_bench.envs import KnowledgeSize
+from fuelhm_bench.methods import run_table
+from fuelhm_bench.scenarios import load_scenario, shipped_scenario_files
+
+SCENARIOS = sorted(shipped_scenario_files())
+BASELINES = sorted(fuelhm_baselines.ENTRY_POINTS)
+
+
+def _small(name: str):
+    sc = load_scenario(name)
+    training = sc.training
+    if training.units * training.flights_per_unit > 24:  # keep small training sets (low_data) as shipped
+        training = dataclasses.replace(training, units=4, flights_per_unit=6)
+    degradations = tuple(dataclasses.replace(d, onset_min=1, onset_max=3, ramp_flights=3) for d in sc.degradations)
+    return dataclasses.replace(sc, fleet=dataclasses.replace(sc.fleet, units=2, flights_per_unit=8),
+                               mission=dataclasses.replace(sc.mission, duration_min=2.0), training=training,
+                               degradations=degradations)
+
+
+@pytest.fixture(scope="module")
+def evaluations(tmp_path_factory):
+    cache = tmp_path_factory.mktemp("matrix-cache")
+    return {name: prepare_evaluation(_small(name), fidelity="physics", knowledge_size=KnowledgeSize.small(),
+                                     robustness=False, cache_dir=cache) for name in SCENARIOS}
+
+
+_LOW_DATA_XFAIL = {("low_data", "isolation-forest"), ("low_data", "itl-classifier")}
+
+
+@pytest.mark.slow  # 8 scenarios' data builds: about 25 s of CPU (minutes of wall time on the shared machine)
+@pytest.mark.parametrize("scenario", SCENARIOS)
+@pytest.mark.parametrize("baseline", BASELINES)
+def test_every_baseline_runs_on_every_scenario(evaluations, scenario, baseline, request):
+    if (scenario, baseline) in _LOW_DATA_XFAIL:
+        request.applymarker(pytest.mark.xfail(
+            strict=True, reason="issue 10 §5: HealthyModel needs >= 11 healthy flights in the baseline's inner "
+                                "fit fold; the low_data baseline fix is i9a's"))
+    ev = evaluations[scenario]
+    method = fuelhm_baselines.load(baseline)()
+    method.fit(ev.fit_indicators, knowledge=ev.method_knowledge, random_state=0)
+    healthy = run_table(method, ev.calibration_indicators)["score"].to_numpy(dtype=float)
+    assert np.all(np.isfinite(healthy))
+    env = ev.env
+    obs, _ = env.reset(options={"unit": 0})
+    method.start_unit(0)
+    for f in range(env.n_flights):
+        decision = method.decide(observation_row(obs, 0, f))
+        assert np.isfinite(decision.score)
+        obs, _, terminated, _, _ = env.step(action_from_decision(decision))
+    assert terminated

@@ -1,0 +1,103 @@
+"""Sealed submissions: every failure becomes a row, limits hold, no orphans, and a spy finds no ground truth."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
+from fuelhm_bench.envs import KnowledgeSize
+from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.methods.sandbox import Limits, SealedMethod
+from submissions import Chatty, Hogs, IdleCurrent, Segfaults, Spins, Spy, SysExit
+from test_runner import tiny
+
+
+@pytest.fixture(scope="module")
+def cache_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("sealed-cache")
+
+
+@pytest.fixture(scope="module")
+def evaluation(cache_dir):
+    return prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(), cache_dir=cache_dir)
+
+
+def test_a_spy_finds_no_ground_truth(evaluation, cache_dir, tmp_path, monkeypatch):
+    """Frames, gc.get_objects(), loaded modules, the cache, the output folder, the parent's memory: nothing."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "labels.csv").write_text("flight_id,onset_internal_leakage,intensity_internal_leakage\n0,3,0.5\n")
+    monkeypatch.setenv("FUELHM_BENCH_CACHE", str(cache_dir))
+    log = tmp_path / "spy.log"
+    dirs = (str(cache_dir), str(out), os.getcwd(), "/tmp")
+    outcome = run_in_env(Spy(dirs=dirs), evaluation, log_path=log, deny=[str(out)], timeout_s=120)
+    assert outcome.ok, outcome.message
+    if outcome.sandbox.startswith("no file-system restriction"):  # no Landlock: memory probes only, then say so
+        outcome = run_in_env(Spy(), evaluation, log_path=log, timeout_s=120)
+        assert outcome.ok and "SPY FOUND: []" in log.read_text()
+        pytest.skip(f"memory is clean, but the file system is not sealed here: {outcome.sandbox}")
+    found = log.read_text()
+    assert "SPY FOUND: []" in found, found[-2000:]
+    assert not outcome.decisions["alarm"].any()
+    # the spy does find the planted file when nothing is sealed: the probe itself works
+    from submissions import _hunt
+
+    assert any("labels.csv" in f for f in _hunt([str(out)]))
+
+
+def test_every_failure_kind_is_a_row(evaluation, tmp_path):
+    cases = {
+        "SysExit": (SysExit(), {}, "error", "SystemExit(0)"),
+        "Segfaults": (Segfaults(), {}, "crash", "signal SIGSEGV during fit"),
+        "RaisesInInit": ("submissions:RaisesInInit", {}, "error", "cannot construct"),
+        "BadModule": ("submissions_nowhere:X", {}, "error", "Cannot import the method module"),
+        "Spins": (Spins(), {"cpu_s": 2.0, "wall_s": 60.0}, "cpu_limit", "CPU-time limit of 2 s during fit"),
+        "Hogs": (Hogs(), {"memory_mb": 1024.0}, "memory", "out of memory"),
+    }
+    for name, (method, limits, status, text) in cases.items():
+        outcome = run_in_env(method, evaluation, limits={"wall_s": 60.0, **limits})
+        assert outcome.status == status and text in outcome.message, (name, outcome.status, outcome.message)
+        assert "\n" not in outcome.message
+    assert run_in_env(IdleCurrent(), evaluation).ok  # and the next method is unaffected
+
+
+def test_logs_are_bounded_and_no_process_survives(evaluation, tmp_path):
+    log = tmp_path / "chatty.log"
+    outcome = run_in_env(Chatty(), evaluation, limits={"log_kb": 64.0, "wall_s": 60.0}, log_path=log)
+    assert outcome.ok, outcome.message
+    text = log.read_text()
+    assert len(text) < 70 * 1024 and "log cut at 65536 bytes" in text
+    pid = int(text.split("ORPHAN ")[1].split()[0])
+    time.sleep(0.5)
+    assert _gone(pid), f"process {pid} started by the method survived the run"
+
+
+def _gone(pid: int) -> bool:
+    """True when the process no longer exists or is a zombie (dead, waiting to be reaped by init)."""
+    try:
+        stat = open(f"/proc/{pid}/stat").read()
+    except OSError:
+        return True
+    return stat.rsplit(")", 1)[1].split()[0] in ("Z", "X")
+
+
+def test_limits_are_validated():
+    with pytest.raises(ParameterError, match="'memory_mb' parameter of Limits must be a finite number >= 256"):
+        Limits(memory_mb=10)
+    with pytest.raises(ParameterError, match="unknown limit 'cpu'"):
+        Limits.coerce({"cpu": 3})
+    with pytest.raises(ParameterError, match="'wall_s' parameter of Limits"):
+        Limits(wall_s=float("nan"))
+
+
+def test_a_reply_is_json_never_pickle(evaluation):
+    """The harness reads plain JSON from the method: a decision's guilt comes back as floats."""
+    with SealedMethod(IdleCurrent(), limits={"wall_s": 60.0}) as m:
+        m.fit(evaluation.fit_indicators)
+        scores = m.scores(evaluation.calibration_indicators)
+        assert scores.dtype == np.float64 and np.all(np.isfinite(scores))
+        assert m.sandbox.startswith(("landlock", "no file-system restriction"))

@@ -1,0 +1,140 @@
+"""The results store: content keys, resume after a kill, views generated from the store, Dask runs."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pandas as pd
+import pytest
+
+from fuelhm_bench.benchmark.leaderboard import LeaderboardConfig, plan_tasks, run_board
+from fuelhm_bench.benchmark.store import ResultStore, evaluation_key
+from fuelhm_bench.cli import main
+from fuelhm_bench.errors import ScenarioError
+
+METHODS = """methods:
+  - fuelhm_baselines.trivial:NullMethod
+  - method: fuelhm_baselines.paper_mahalanobis:PaperMahalanobis
+    params: {a: 2.0}
+  - method: fuelhm_baselines.paper_mahalanobis:PaperMahalanobis
+    params: {a: 2.0, window: 5}
+"""
+
+
+@pytest.fixture(scope="module")
+def board_config(tmp_path_factory):
+    from conftest import _tiny_scenario
+
+    root = tmp_path_factory.mktemp("board")
+    scenario = _tiny_scenario(root)
+    cfg = root / "lb.yaml"
+    cfg.write_text(METHODS + f"scenarios: [{scenario}]\nfidelity: surrogate\ntimeout_s: 300\n")
+    return cfg
+
+
+def _rows(db) -> pd.DataFrame:
+    with sqlite3.connect(db) as con:
+        return pd.read_sql_query("SELECT key, method, params, status, created FROM results", con)
+
+
+def test_key_covers_every_field():
+    base = dict(method="m:C", params={"a": 2.0}, source_hash="h", scenario="s-v1", seed=1, fidelity="physics",
+                scale=1.0, package_version="0.1.0")
+    keys = {evaluation_key(**base)}
+    for field, value in [("params", {"a": 2.0, "window": 5}), ("params", {"a": 2}), ("source_hash", "g"),
+                         ("scenario", "s-v2"), ("seed", 2), ("fidelity", "surrogate"), ("scale", 0.5),
+                         ("package_version", "0.2.0"), ("method", "m:D")]:
+        keys.add(evaluation_key(**{**base, field: value}))
+    assert len(keys) == 10  # 2.0 and 2 are different typed values
+
+
+@pytest.mark.slow  # about 2 minutes on the loaded 2-core machine (three runs of a subprocess leaderboard)
+def test_killed_leaderboard_resumes_only_what_is_missing(board_config, tmp_path):
+    """Killed (SIGKILL, whole group) after the first stored row, restarted: only the missing keys run."""
+    out = tmp_path / "board"
+    cmd = [sys.executable, "-m", "fuelhm_bench.cli", "leaderboard", "--config", str(board_config), "--out", str(out)]
+    env = {**os.environ, "FUELHM_NO_PROGRESS": "1"}
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    db = out / "results.sqlite"
+    deadline = time.monotonic() + 600
+    while time.monotonic() < deadline:
+        if db.is_file():
+            try:
+                if len(_rows(db)) >= 1:
+                    break
+            except (sqlite3.Error, pd.errors.DatabaseError):
+                pass
+        if proc.poll() is not None:
+            pytest.fail(f"the run ended before it could be killed: {proc.stderr.read().decode()[-2000:]}")
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    first = _rows(db)
+    assert 1 <= len(first) < 3
+    # a second run: refuses nothing (the folder holds a store), evaluates only the rest
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert f"{len(first)} of 3 evaluations already in" in done.stderr
+    rows = _rows(db)
+    assert len(rows) == 3 and set(rows["status"]) == {"ok"}
+    kept = rows.set_index("key").loc[first["key"], "created"]
+    assert list(kept) == list(first["created"])  # the stored rows were not evaluated again
+    # two settings of one class: separate rows, folders and board lines with their parameters
+    board = pd.read_csv(out / "leaderboard.csv")
+    assert "Unnamed: 0" not in board.columns and "index" not in board.columns
+    paper = board[board["method"].str.contains("PaperMahalanobis")]
+    assert sorted(paper["params"]) == ['{"a": 2.0, "window": 5}', '{"a": 2.0}']
+    assert paper["folder"].nunique() == 2 and all((out / f).is_dir() for f in board["folder"])
+    assert "params" in (out / "leaderboard.md").read_text()
+    # a third run stores nothing new; --rerun evaluates again
+    again = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+    assert again.returncode == 0 and "3 of 3 evaluations already in" in again.stderr
+    assert list(_rows(db)["created"]) == list(rows["created"])
+
+
+def test_output_folder_without_store_is_not_overwritten(board_config, tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("precious")
+    assert main(["leaderboard", "--config", str(board_config), "--out", str(out)]) == 2
+    assert "not empty and holds no results store" in capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "precious"
+
+
+@pytest.mark.parametrize("text, match", [
+    ("scale: fast\n", r"scale must be a finite number > 0. Got 'fast' instead"),
+    ("scale: -1\n", r"scale must be a finite number > 0. Got -1 instead"),
+    ("timeout_s: .inf\n", r"timeout_s must be a finite number > 0"),
+    ("seeds: [x]\n", r"seeds must be a list of integers"),
+    ("limits: {memory_mb: 10}\n", r"limits: The 'memory_mb' parameter of Limits must be"),
+    ("limits: {cpu: 10}\n", r"limits: unknown limit 'cpu'"),
+])
+def test_bad_config_values_name_the_field(tmp_path, text, match):
+    cfg = tmp_path / "lb.yaml"
+    cfg.write_text("methods: [a:B]\nscenarios: [paper_2012]\n" + text)
+    with pytest.raises(ScenarioError, match=re.escape(str(cfg)) + ": " + match):
+        LeaderboardConfig.from_yaml(cfg)
+
+
+@pytest.mark.slow  # a local Dask cluster and two leaderboard runs: about a minute
+def test_dask_local_cluster_matches_the_local_run(board_config, tmp_path):
+    """--jobs 2: data builds and sealed evaluations as Dask tasks on a loopback cluster; same results."""
+    config = LeaderboardConfig.from_yaml(board_config)
+    config = LeaderboardConfig(config.methods[:2], config.scenarios, config.seeds, config.scale, config.timeout_s,
+                               config.fidelity)
+    local = run_board(config, tmp_path / "local", log=lambda s: None)
+    dask = run_board(config, tmp_path / "dask", jobs=2, log=lambda s: None)
+    cols = ["method", "params", "status", "summary_score", "fpr_standard_thr", "fnr_standard_thr"]
+    pd.testing.assert_frame_equal(local[cols], dask[cols])
+    with ResultStore(tmp_path / "dask" / "results.sqlite") as store:
+        assert store.keys() == {t.key for t in plan_tasks(config)}
+        rec = store.records().iloc[0]
+        assert rec["provenance"]["package_version"] and rec["provenance"]["python"]
+        assert rec["provenance"]["host"] and rec["created"]
