@@ -33,7 +33,7 @@ import pandas as pd
 from fuelhm_bench.diagnosis import HealthyModel
 from fuelhm_bench.methods import BaseMethod, Decision, Knowledge
 
-from baselines._common import (collinearity_guilt_7, cross_fit_folds, indicator_values,
+from fuelhm_baselines._common import (collinearity_guilt_7, cross_fit_folds, indicator_values,
                                reference_signatures, row_values, sklearn_seed)
 
 __all__ = ["HealthyScoreDetector", "standardised"]

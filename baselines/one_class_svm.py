@@ -14,8 +14,8 @@ from sklearn.svm import OneClassSVM
 
 from fuelhm_bench.methods.params import Interval, Options, RandomState
 
-from baselines._common import ModeSubset
-from baselines._detector import HealthyScoreDetector
+from fuelhm_baselines._common import ModeSubset
+from fuelhm_baselines._detector import HealthyScoreDetector
 
 __all__ = ["OneClassSVMMethod"]
 

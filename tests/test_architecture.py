@@ -20,7 +20,7 @@ LAYERS = (
     ("scenarios", "calibration"),
     ("datasets",),
     ("envs",),
-    ("benchmark",),
+    ("benchmark", "validation"),
     ("cli",),
     ("testing",),  # fixtures for tests: nothing in the product imports them
 )

@@ -565,7 +565,7 @@ def test_default_baselines_fit_on_the_low_data_training_set(make):
 
 
 def test_standardisation_needs_three_flights():
-    from baselines._common import STANDARDISATION_MIN_FLIGHTS, standardisation
+    from fuelhm_baselines._common import STANDARDISATION_MIN_FLIGHTS, standardisation
     from fuelhm_bench.errors import DataFormatError
 
     x = np.random.default_rng(0).normal(size=(STANDARDISATION_MIN_FLIGHTS, len(IND)))
@@ -578,7 +578,7 @@ def test_standardisation_needs_three_flights():
 @pytest.mark.slow
 def test_every_baseline_runs_on_the_shipped_low_data_scenario(tmp_path):
     """The shipped low_data scenario itself (its 3 x 6 training flights), surrogate fidelity, small scale."""
-    from fuelhm_bench.runner import prepare_evaluation, run_in_env
+    from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
     from sizes import knowledge_size
 
     evaluation = prepare_evaluation("low_data", fidelity="surrogate", scale=0.2, knowledge_size=knowledge_size(),

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from baselines.raw_tracking import FEATURES, RawTrackingMethod, raw_features
+from fuelhm_baselines.raw_tracking import FEATURES, RawTrackingMethod, raw_features
 from fuelhm_bench.errors import DataFormatError, MethodError
 from fuelhm_bench.flights.fleet import FleetConfig, flights_frame, iter_flights
 from fuelhm_bench.flights.schedule import ModeSchedule

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import baselines
-from baselines.gaussian_full import FullGaussianMethod
-from baselines.gaussian_mixture import GaussianMixtureMethod
-from baselines.nearest_neighbour import NearestNeighbourMethod
-from baselines.one_class_svm import OneClassSVMMethod
+import fuelhm_baselines as baselines
+from fuelhm_baselines.gaussian_full import FullGaussianMethod
+from fuelhm_baselines.gaussian_mixture import GaussianMixtureMethod
+from fuelhm_baselines.nearest_neighbour import NearestNeighbourMethod
+from fuelhm_baselines.one_class_svm import OneClassSVMMethod
 from fuelhm_bench.methods import check_method, make_check_data, parametrize_with_checks
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
 

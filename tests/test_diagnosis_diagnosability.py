@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from fuelhm_bench.diagnosis.diagnosability import diagnosability_report, fit_power_law
-from fuelhm_bench.diagnosis.synthetic import DEFAULT_STD, make_doe_table, make_healthy_table
+from fuelhm_bench.testing.diagnosis import DEFAULT_STD, make_doe_table, make_healthy_table
 from fuelhm_bench.errors import ParameterError
 
 

@@ -29,5 +29,5 @@ def test_a_module_needing_a_missing_extra_is_left_out_of_doctest_collection(tmp_
                       "def f():\n    import also_missing_but_lazy\n")
     assert conftest.missing_optional_imports(module) == ["surely_not_installed_xyz"]
     plain = tmp_path / "plain.py"
-    plain.write_text("import numpy, scipy\nfrom baselines import _common\n")
+    plain.write_text("import numpy, scipy\nfrom fuelhm_baselines import _common\n")
     assert conftest.missing_optional_imports(plain) == []

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fuelhm_bench.drift_sweep import DriftSweep, run_drift_sweep
+from fuelhm_bench.benchmark.drift_sweep import DriftSweep, run_drift_sweep
 from fuelhm_bench.errors import ParameterError
 from fuelhm_bench.methods import RandomMethod
 from fuelhm_bench.scoring import degradation_summary, drift_sweep_table
@@ -61,7 +61,7 @@ def test_a_method_blind_to_the_data_shows_no_change(tiny):
 
 @pytest.mark.slow
 def test_sweep_measures_fpr_and_fnr_changes_of_a_real_method(tiny):
-    from baselines.paper_mahalanobis import PaperMahalanobis
+    from fuelhm_baselines.paper_mahalanobis import PaperMahalanobis
 
     sweep = DriftSweep(parameters=("fluid.supply_rise_at_100pct_pa",), magnitudes=(-0.05, -0.25, -0.5),
                        tolerance=0.05)

@@ -8,7 +8,7 @@ import pytest
 
 from fuelhm_bench.cli import main
 from fuelhm_bench.errors import DataFormatError, OutputPathError
-from fuelhm_bench.exchange import export_scenario, read_decisions, score_decisions
+from fuelhm_bench.benchmark.exchange import export_scenario, read_decisions, score_decisions
 from fuelhm_bench.methods import GUILT_COLUMNS
 from fuelhm_bench.scoring import perfect_decisions
 

@@ -1,4 +1,4 @@
-"""The fidelity check (:mod:`fuelhm_bench.fidelity`, ``fuelhm-bench fidelity``).
+"""The fidelity check (:mod:`fuelhm_bench.benchmark.fidelity`, ``fuelhm-bench fidelity``).
 
 Default run: a shrunk scenario (3 units x 8 flights of 2 minutes, ``KnowledgeSize.small()``) with three
 methods at both fidelities, and the command's argument errors. ``-m slow``: the full reference panel on
@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from scipy.stats import kendalltau
 
-from baselines.gaussian_full import FullGaussianMethod
-from baselines.paper_mahalanobis import PaperMahalanobis
-from baselines.trivial import NullMethod
+from fuelhm_baselines.gaussian_full import FullGaussianMethod
+from fuelhm_baselines.paper_mahalanobis import PaperMahalanobis
+from fuelhm_baselines.trivial import NullMethod
 from fuelhm_bench.cli import main
 from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.errors import ParameterError
-from fuelhm_bench.fidelity import PANEL, TARGETS, fidelity_check
+from fuelhm_bench.benchmark.fidelity import PANEL, TARGETS, fidelity_check
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +69,7 @@ def test_a_panel_needs_two_methods():
 
 
 def test_cli_rejects_a_single_method(tmp_path, capsys):
-    code = main(["fidelity", "--scenario", "paper_2012", "--method", "baselines.trivial:NullMethod",
+    code = main(["fidelity", "--scenario", "paper_2012", "--method", "fuelhm_baselines.trivial:NullMethod",
                  "--out", str(tmp_path / "o")])
     assert code == 2
     assert "--method must be given at least twice" in capsys.readouterr().err

@@ -18,7 +18,7 @@ from fuelhm_bench.indicators import (
 from fuelhm_bench.indicators.config import N_ACCUMULATORS
 from fuelhm_bench.indicators.curve import COUNTER_NAMES
 from fuelhm_bench.indicators.extended import MIN_WINDOW_POINTS
-from fuelhm_bench.indicators.synthetic import DualGainCurve, synthetic_flight
+from fuelhm_bench.testing.indicators import DualGainCurve, synthetic_flight
 from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, EXTENDED_INDICATOR_UNITS
 
 

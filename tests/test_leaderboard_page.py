@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fuelhm_bench.leaderboard_page import leaderboard_html, write_leaderboard_page
+from fuelhm_bench.benchmark.page import leaderboard_html, write_leaderboard_page
 
 CHROMIUM = os.environ.get("FUELHM_CHROMIUM", "/usr/bin/chromium")
 CHROMEDRIVER = os.environ.get("FUELHM_CHROMEDRIVER", "/usr/bin/chromedriver")

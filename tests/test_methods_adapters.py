@@ -154,7 +154,7 @@ def _readme_section() -> str:
 
 
 def _evaluate_lines() -> list[tuple[str, dict]]:
-    from fuelhm_bench.evaluation import parse_params
+    from fuelhm_bench.benchmark.loading import parse_params
 
     bash = re.search(r"```bash\n(.*?)```", _readme_section(), re.S).group(1).replace("\\\n", " ")
     out = []
@@ -214,7 +214,7 @@ def _evaluation_data():
 
 def test_readme_pyod_recipe(data):
     pytest.importorskip("pyod", reason="PyOD is an optional extra: pip install 'fuelhm-bench[pyod]'")
-    from fuelhm_bench.evaluation import load_method
+    from fuelhm_bench.methods.loading import load_method
 
     [(spec, params)] = [(m, p) for m, p in _evaluate_lines() if m.endswith(":PyODMethod")]
     assert params == {"detector": "pyod.models.ecod:ECOD"}

@@ -37,7 +37,7 @@ def test_healthy_false_alarm_rate_at_a2_is_gaussian(name):
     Measured on paper_2012 with the release physics: 5.9 % with 20 x 10 training flights (50 calibration
     flights), 4.05 % with 40 x 10 (100), 9.2 % with 80 x 5 (100): more units help only with enough flights
     per unit, and the scored fleet's healthy flights cluster by unit, so the rate itself is noisy."""
-    from baselines.paper_mahalanobis import PaperMahalanobis
+    from fuelhm_baselines.paper_mahalanobis import PaperMahalanobis
     from fuelhm_bench.evaluation import run_method, scenario_data
     from fuelhm_bench.scoring import Run, headline_kpis, score_run
 

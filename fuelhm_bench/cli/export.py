@@ -42,7 +42,7 @@ def scenario_kwargs(args: argparse.Namespace) -> dict:
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.cli._common import check_output_dir
     from fuelhm_bench.datasets.cache import resolve_scenario
-    from fuelhm_bench.exchange import export_scenario
+    from fuelhm_bench.benchmark.exchange import export_scenario
 
     resolve_scenario(args.scenario)  # a bad scenario fails before any directory is created
     out = check_output_dir(args.out)

@@ -38,8 +38,8 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from fuelhm_bench.errors import ParameterError
-    from fuelhm_bench.evaluation import load_method
-    from fuelhm_bench.fidelity import fidelity_check
+    from fuelhm_bench.methods.loading import load_method
+    from fuelhm_bench.benchmark.fidelity import fidelity_check
 
     out = check_output_dir(args.out)
     scenarios = list(args.scenario)
@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         rows.append(report.summary())
         print(report.to_markdown())
     table = pd.DataFrame(rows)
-    from fuelhm_bench.fidelity import _markdown
+    from fuelhm_bench.benchmark.fidelity import _markdown
 
     (out / "table.md").write_text(_markdown(table) + "\n", encoding="utf-8")
     table.to_csv(out / "table.csv", index=False)

@@ -21,7 +21,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fuelhm_bench.exchange import score_decisions
+    from fuelhm_bench.benchmark.exchange import score_decisions
     from fuelhm_bench.scoring import headline_kpis
     from fuelhm_bench.scoring.bootstrap import scorecard_intervals
 

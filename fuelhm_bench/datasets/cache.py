@@ -432,9 +432,9 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     Returns
     -------
     pandas.DataFrame
-        The table of :func:`fuelhm_bench.diagnosis.doe.run_doe` (a copy).
+        The table of :func:`fuelhm_bench.datasets.doe.run_doe` (a copy).
     """
-    from fuelhm_bench.diagnosis.doe import DesignOfExperiments, run_doe
+    from fuelhm_bench.datasets.doe import DesignOfExperiments, run_doe
 
     sc = resolve_scenario(scenario)
     _check_minutes(flight_minutes, "surrogate_doe")

@@ -260,7 +260,7 @@ def diagnosability_report(doe_table: pd.DataFrame, healthy_table: pd.DataFrame, 
     Parameters
     ----------
     doe_table : pandas.DataFrame
-        Design of experiments (:func:`~fuelhm_bench.diagnosis.doe.run_doe`).
+        Design of experiments (:func:`~fuelhm_bench.datasets.doe.run_doe`).
     healthy_table : pandas.DataFrame
         Healthy indicator table (its sample standard deviation, ddof=1, scales the Z-scores, as
         the healthy model of eq. 7).

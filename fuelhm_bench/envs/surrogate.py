@@ -7,7 +7,7 @@ whose law is learnt, once, from two indicator tables simulated by the physics
 
 * a **healthy table** of many units flying several flights each (``unit_id``
   column), with the scored fleet's truth model (hidden effects, drift);
-* a **design of experiments** (:func:`fuelhm_bench.diagnosis.doe.run_doe`): each
+* a **design of experiments** (:func:`fuelhm_bench.datasets.doe.run_doe`): each
   DOE unit flies one flight healthy and with each mode at each intensity, the
   same mission and noise every time, so that ``I(unit, mode, f) - I(unit, healthy)``
   is the unit's own response to the degradation.
@@ -368,7 +368,7 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
         companions (:func:`fuelhm_bench.datasets.fleet_indicators`). At least one
         unit with two flights; two units or more for the unit-to-unit part.
     doe : pandas.DataFrame
-        Design-of-experiments table (:func:`fuelhm_bench.diagnosis.doe.run_doe`):
+        Design-of-experiments table (:func:`fuelhm_bench.datasets.doe.run_doe`):
         ``unit_id``, ``mode`` (``"healthy"`` or a mode id), ``intensity`` and the
         same indicator columns.
     modes : tuple of str or None, default=None

@@ -14,7 +14,7 @@ wilson_interval, bootstrap_ratio_interval, rates_with_intervals
     Confidence intervals.
 error_rate_changes, drift_sweep_table, degradation_summary
     Robustness: FPR and FNR changes under drift, over a sweep, and the drift at which a method
-    degrades by a stated amount (the sweep itself: :mod:`fuelhm_bench.drift_sweep`).
+    degrades by a stated amount (the sweep itself: :mod:`fuelhm_bench.benchmark.drift_sweep`).
 kpi_intervals, scorecard_intervals (scoring.bootstrap)
     Unit-bootstrap intervals of the headline KPIs and the summary score.
 mean_ranks, friedman_test, critical_difference, wilcoxon_holm, cd_diagram (scoring.ranking)

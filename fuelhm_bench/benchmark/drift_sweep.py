@@ -12,7 +12,7 @@ the drift is of the scored units); the method is fitted and calibrated on them, 
 scenario's scored fleet without drift (the nominal run) and with each (parameter, magnitude)
 drift applied to the scored fleet's nominal model (same seeds: same units, schedules and flights;
 only the drifted parameter differs). Every run goes through
-:func:`fuelhm_bench.evaluation.run_method` (a sealed child process with a time limit).
+:func:`fuelhm_bench.benchmark.harness.run_in_env` (the sealed method process with its limits).
 """
 
 from __future__ import annotations
@@ -128,7 +128,7 @@ class DriftSweepResult:
 
 def run_drift_sweep(method, scenario, sweep: DriftSweep | None = None, *, scale: float = 1.0, doe_units: int = 6,
                     seed: int | None = None, random_state: int = 0, timeout_s: float = 600.0,
-                    progress: Callable[[int], object] | None = None) -> DriftSweepResult:
+                    progress: Callable[[int], object] | None = None, cache_dir=None) -> DriftSweepResult:
     """Run one method through a drift sweep on a scenario (see the module docstring).
 
     Parameters
@@ -142,14 +142,19 @@ def run_drift_sweep(method, scenario, sweep: DriftSweep | None = None, *, scale:
         None: :class:`DriftSweep()` (supply pressure rise +5, +10, +20 %).
     scale : float, default=1.0
         Multiplies the number of scored units (quick looks).
-    doe_units, seed
-        As :func:`fuelhm_bench.evaluation.scenario_data`.
+    doe_units : int
+        Units of the design of experiments of the published knowledge
+        (:class:`~fuelhm_bench.datasets.cache.KnowledgeSize`).
+    seed : int or None
+        Overrides the scenario's master seed.
     random_state : int, default=0
         Passed to the method's ``fit``.
     timeout_s : float, default=600.0
         Wall-clock limit of each run.
     progress : callable, optional
         Called with numbers of flights simulated.
+    cache_dir : path or None, default=None
+        Simulation cache (None: the default cache directory).
 
     Returns
     -------
@@ -162,10 +167,10 @@ def run_drift_sweep(method, scenario, sweep: DriftSweep | None = None, *, scale:
     MethodError
         The method failed on one of the runs (the message says which).
     """
-    from fuelhm_bench.datasets import fleet_indicators
-    from fuelhm_bench.evaluation import EvaluationData, run_method, scenario_data
+    from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
+    from fuelhm_bench.datasets.cache import KnowledgeSize
     from fuelhm_bench.scenarios import load_scenario
-    from fuelhm_bench.scoring import Run, degradation_summary, drift_sweep_table
+    from fuelhm_bench.scoring import degradation_summary, drift_sweep_table
 
     sweep = DriftSweep() if sweep is None else sweep
     if not isinstance(sweep, DriftSweep):
@@ -179,26 +184,19 @@ def run_drift_sweep(method, scenario, sweep: DriftSweep | None = None, *, scale:
             spec.apply(truth)
         except FuelHMError as exc:
             raise ParameterError(f"DriftSweep cannot drift {key[0]} by {key[1]:g} ({sweep.change}): {exc}") from None
-    data, _ = scenario_data(sc, seed=seed, doe_units=doe_units, scale=scale, progress=progress, drifted=False)
+    common = {"fidelity": "physics", "seed": seed, "scale": scale, "robustness": False,
+              "knowledge_size": KnowledgeSize(doe_units=doe_units), "progress": progress, "cache_dir": cache_dir}
 
-    def run_on(test_ind, test_lab, label):
-        d = EvaluationData(data.fit_indicators, data.calibration_indicators, test_ind, test_lab, data.knowledge,
-                           name=f"{sc.name} ({label})")
-        outcome = run_method(method, d, random_state=random_state, timeout_s=timeout_s)
+    def run_on(variant, label):
+        evaluation = prepare_evaluation(variant, **common)  # same training, knowledge and seeds for every variant
+        outcome = run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s)
         if not outcome.ok:
             raise MethodError(f"{outcome.method} failed on the {label} run of the drift sweep: {outcome.status}: "
                               f"{outcome.message.splitlines()[0] if outcome.message else ''}")
-        return Run(labels=test_lab, decisions=outcome.decisions, healthy_scores=outcome.healthy_scores,
-                   name=f"{outcome.method} ({label})")
+        return outcome.run(name=f"{outcome.method} ({label})")
 
-    nominal = run_on(data.test_indicators, data.test_labels, "no drift")
-    n_units = data.test_labels["unit_id"].nunique()
-    runs = {}
-    for key, spec in specs:
-        cfg = dataclasses.replace(sc, drift=(spec,)).test_fleet_config()
-        cfg = dataclasses.replace(cfg, n_units=n_units)
-        ind, lab = fleet_indicators(cfg, progress=progress)
-        runs[key] = run_on(ind, lab, f"{key[0]} {key[1]:+g}")
+    nominal = run_on(sc, "no drift")
+    runs = {key: run_on(dataclasses.replace(sc, drift=(spec,)), f"{key[0]} {key[1]:+g}") for key, spec in specs}
     table = drift_sweep_table(nominal, runs)
     summary = degradation_summary(table, tolerance=sweep.tolerance)
     return DriftSweepResult(sweep, repr(method), table, summary, nominal, runs)

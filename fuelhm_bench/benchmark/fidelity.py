@@ -35,15 +35,15 @@ __all__ = ["PANEL", "TARGETS", "FidelityReport", "compare_outcomes", "fidelity_c
 #: The reference panel: the shipped baselines and detectors of different inductive biases
 #: (short name -> ``module:Class`` entry point of ``baselines/``).
 PANEL: dict[str, str] = {
-    "null": "baselines.trivial:NullMethod",
-    "random": "baselines.trivial:RandomMethod",
-    "paper-mahalanobis": "baselines.paper_mahalanobis:PaperMahalanobis",
-    "isolation-forest": "baselines.isolation_forest:IsolationForestMethod",
-    "itl-classifier": "baselines.itl_classifier:ITLClassifierMethod",
-    "full-gaussian": "baselines.gaussian_full:FullGaussianMethod",
-    "gaussian-mixture": "baselines.gaussian_mixture:GaussianMixtureMethod",
-    "one-class-svm": "baselines.one_class_svm:OneClassSVMMethod",
-    "nearest-neighbour": "baselines.nearest_neighbour:NearestNeighbourMethod",
+    "null": "fuelhm_baselines.trivial:NullMethod",
+    "random": "fuelhm_baselines.trivial:RandomMethod",
+    "paper-mahalanobis": "fuelhm_baselines.paper_mahalanobis:PaperMahalanobis",
+    "isolation-forest": "fuelhm_baselines.isolation_forest:IsolationForestMethod",
+    "itl-classifier": "fuelhm_baselines.itl_classifier:ITLClassifierMethod",
+    "full-gaussian": "fuelhm_baselines.gaussian_full:FullGaussianMethod",
+    "gaussian-mixture": "fuelhm_baselines.gaussian_mixture:GaussianMixtureMethod",
+    "one-class-svm": "fuelhm_baselines.one_class_svm:OneClassSVMMethod",
+    "nearest-neighbour": "fuelhm_baselines.nearest_neighbour:NearestNeighbourMethod",
 }
 
 #: Agreement targets: minimum Kendall tau, maximum |summary-score difference| [points],
@@ -182,7 +182,7 @@ def compare_outcomes(scenario: str, outcomes: dict[str, dict], *, targets: dict 
         Scenario id.
     outcomes : dict
         ``{"physics": {name: outcome}, "surrogate": {name: outcome}}``; an outcome
-        has ``ok``, ``status`` and ``score()`` (:class:`fuelhm_bench.runner.EnvOutcome`).
+        has ``ok``, ``status`` and ``score()`` (:class:`fuelhm_bench.benchmark.harness.Outcome`).
     targets : dict or None, default=None
         Overrides of :data:`TARGETS`.
     seconds : dict or None, default=None
@@ -233,7 +233,7 @@ def compare_outcomes(scenario: str, outcomes: dict[str, dict], *, targets: dict 
 def _run_panel(methods: dict, scenario, fidelity: str, *, seed, scale, flight_minutes, knowledge_size,
                cache_dir, random_state, timeout_s, progress) -> dict:
     """The one place that calls the evaluation harness: prepare a fidelity once, run every method on it."""
-    from fuelhm_bench.runner import prepare_evaluation, run_in_env
+    from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
 
     evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
                                     flight_minutes=flight_minutes, robustness=False,
@@ -260,7 +260,7 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
         hyperparameters (``baselines`` must be importable: run from the
         repository root).
     seed, scale, flight_minutes, knowledge_size, cache_dir
-        See :func:`fuelhm_bench.runner.prepare_evaluation` (the same for both fidelities).
+        See :func:`fuelhm_bench.benchmark.harness.prepare_evaluation` (the same for both fidelities).
     random_state : int, default=0
         Passed to every ``fit``.
     timeout_s : float, default=600.0
@@ -278,7 +278,7 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
 
     sc = resolve_scenario(scenario)
     if methods is None:
-        from fuelhm_bench.evaluation import load_method
+        from fuelhm_bench.methods.loading import load_method
 
         methods = {name: load_method(spec) for name, spec in PANEL.items()}
     if not isinstance(methods, dict) or len(methods) < 2:
