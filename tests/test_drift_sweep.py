@@ -43,9 +43,14 @@ def test_sweep_table_rejects_bad_keys():
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
+    import yaml
     from conftest import _tiny_scenario
 
-    return _tiny_scenario(tmp_path_factory.mktemp("sweep"), "tinysweep", base="paper_2012")
+    path = _tiny_scenario(tmp_path_factory.mktemp("sweep"), "tinysweep", base="paper_2012")
+    data = yaml.safe_load(path.read_text())
+    data["fleet"]["units"], data["mission"]["duration_min"] = 2, 3.0  # smaller still: 3-minute flights
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
 
 
 def test_a_method_blind_to_the_data_shows_no_change(tiny):
