@@ -107,7 +107,7 @@ def test_physics_runner_reproduces_the_evaluation_pipeline(cache_dir):
 def test_surrogate_null_method_cost_is_the_cost_model(surrogate_eval):
     """A never-alarming method pays undetected_flight_kusd per detectable flight and failure_kusd per failure."""
     outcome = run_in_env(NullMethod(), surrogate_eval)
-    assert outcome.ok and outcome.fidelity == "surrogate" and outcome.scenario == "tiny-v1"
+    assert outcome.ok and outcome.fidelity == "surrogate" and outcome.scenario == surrogate_eval.scenario.id == f"tiny-v{surrogate_eval.scenario.version}"
     costs = surrogate_eval.scenario.costs
     inten = outcome.labels[[f"intensity_{m}" for m in MODE_IDS]].to_numpy()
     maxi = outcome.labels[[f"max_intensity_{m}" for m in MODE_IDS]].to_numpy()
