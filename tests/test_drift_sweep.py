@@ -43,11 +43,17 @@ def test_sweep_table_rejects_bad_keys():
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
+    import yaml
     from conftest import _tiny_scenario
 
-    return _tiny_scenario(tmp_path_factory.mktemp("sweep"), "tinysweep", base="paper_2012")
+    path = _tiny_scenario(tmp_path_factory.mktemp("sweep"), "tinysweep", base="paper_2012")
+    data = yaml.safe_load(path.read_text())
+    data["fleet"]["units"], data["mission"]["duration_min"] = 2, 3.0  # smaller still: 3-minute flights
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
 
 
+@pytest.mark.slow
 def test_a_method_blind_to_the_data_shows_no_change(tiny):
     sweep = DriftSweep(parameters=("fluid.supply_rise_at_100pct_pa",), magnitudes=(-0.1, -0.3, -0.5))
     result = run_drift_sweep(RandomMethod(alarm_probability=0.3), tiny, sweep, doe_units=1)
@@ -75,3 +81,20 @@ def test_sweep_measures_fpr_and_fnr_changes_of_a_real_method(tiny):
     assert s["degrades_at"] in (-0.05, -0.25, -0.5) and "fpr" in s["by"]
     with pytest.raises(ParameterError, match="cannot drift"):
         run_drift_sweep(PaperMahalanobis(), tiny, DriftSweep(parameters=("fluid.nonexistent_pa",)), doe_units=1)
+
+
+def test_drift_sweep_command(tiny, tmp_path):
+    from fuelhm_bench.cli import main
+
+    out = tmp_path / "sweep"
+    assert main(["drift-sweep", "--method", "fuelhm_bench.methods:RandomMethod", "--param", "alarm_probability=0.2",
+                 "--scenario", str(tiny), "--parameters", "servovalve.spool_time_constant_s",
+                 "--magnitudes", "0.1,0.2,0.4", "--doe-units", "1", "--out", str(out)]) == 0
+    table = pd.read_csv(out / "drift_sweep.csv")
+    assert table["magnitude"].tolist() == [0.1, 0.2, 0.4]
+    # A data-blind method decides the same on the same flights: the drift cannot move its rates.
+    assert (table["delta_fpr"] == 0).all() and (table["delta_fnr"] == 0).all()
+    assert "neither FPR nor FNR" in pd.read_csv(out / "drift_summary.csv")["summary"].iloc[0]
+    assert main(["drift-sweep", "--method", "fuelhm_bench.methods:RandomMethod", "--scenario", str(tiny),
+                 "--parameters", "servovalve.spool_time_constant_s", "--magnitudes", "0.1,0.2",
+                 "--out", str(tmp_path / "bad")]) == 2

@@ -170,7 +170,7 @@ def test_readme_section_is_short():
 
 
 def test_readme_pipeline_recipe(tmp_path, monkeypatch):
-    from fuelhm_bench.evaluation import load_method, run_method, score_outcome
+    from fuelhm_bench.methods.loading import load_method
 
     code = re.search(r"```python\n(.*?)```", _readme_section(), re.S).group(1)
     (tmp_path / "my_ocsvm.py").write_text(code)
@@ -182,17 +182,16 @@ def test_readme_pipeline_recipe(tmp_path, monkeypatch):
     sk = [(m, p) for m, p in lines if m.endswith(":SklearnMethod")]
     assert sk == [("fuelhm_bench.methods.adapters:SklearnMethod",
                    {"estimator": "sklearn.ensemble:IsolationForest"})]
-    # from the README to a scored row (the evaluation runner, forked, then the scorer)
-    outcome = run_method(method, _evaluation_data(), timeout_s=120)
-    assert outcome.ok, outcome.message
-    assert score_outcome(outcome, _evaluation_data()).summary_score > 0
-    forest = load_method(*sk[0]).fit(_evaluation_data().fit_indicators, random_state=0)
+    # from the README to a scored row (fit on healthy units, decide on the drifting units, score)
+    assert _score_in_process(method).summary_score > 0
+    forest = load_method(*sk[0]).fit(make_check_data(0, **SMALL).healthy, random_state=0)
     assert type(forest.detector_).__name__ == "IsolationForest"
 
 
-def _evaluation_data():
-    """The check data as an evaluation data set, with the labels of its drifting units."""
-    from fuelhm_bench.evaluation import EvaluationData
+def _score_in_process(method):
+    """Fit on the check data's healthy flights, decide on its drifting units, score against their labels."""
+    from fuelhm_bench.methods import run_table
+    from fuelhm_bench.scoring import Run, score_run
     from fuelhm_bench.taxonomy import MODE_IDS
 
     d = make_check_data(0, **SMALL)
@@ -208,8 +207,9 @@ def _evaluation_data():
                 row[f"max_intensity_{m}"] = 1.0 if active else 0.0
                 row[f"onset_{m}"] = onset if active else -1
             rows.append(row)
-    return EvaluationData(d.healthy, d.healthy.iloc[:20],
-                          d.units, pd.DataFrame(rows), d.knowledge, name="check")
+    method.fit(d.healthy, knowledge=d.knowledge, random_state=0)
+    healthy = run_table(method, d.healthy.iloc[:20])["score"].to_numpy()
+    return score_run(Run(labels=pd.DataFrame(rows), decisions=run_table(method, d.units), healthy_scores=healthy))
 
 
 def test_readme_pyod_recipe(data):

@@ -86,7 +86,7 @@ def test_surrogate_null_method_cost_is_the_cost_model(surrogate_eval):
     """A never-alarming method pays undetected_flight_kusd per detectable flight and failure_kusd per failure;
     a failure overhauls the unit (every present mode is removed), as the maintenance protocol says."""
     outcome = run_in_env(NullMethod(), surrogate_eval)
-    assert outcome.ok and outcome.fidelity == "surrogate" and outcome.scenario == "tiny-v1"
+    assert outcome.ok and outcome.fidelity == "surrogate" and outcome.scenario == surrogate_eval.scenario.id == f"tiny-v{surrogate_eval.scenario.version}"
     costs = surrogate_eval.scenario.costs
     assert outcome.costs == costs
     expected, failures = 0.0, 0

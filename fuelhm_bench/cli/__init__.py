@@ -18,7 +18,7 @@ from fuelhm_bench.errors import FuelHMError
 #: Command modules, in the order of ``--help``.
 COMMAND_MODULES = (
     "simulate", "sweep", "plot_curve", "indicators", "itl", "calibrate", "paper", "evaluate", "leaderboard",
-    "validate", "schema", "discrepancy", "fidelity", "export", "score",
+    "validate", "schema", "discrepancy", "fidelity", "export", "score", "drift_sweep",
 )
 
 
