@@ -225,6 +225,7 @@ def evaluate_task(task: Task, *, limits: dict, method_seed: int = 0, cache_dir=N
             card = outcome.score()
             kp = headline_kpis(card)
             kp["cost_kusd"] = outcome.cost_kusd
+            kp.update(statistics(card, seed=task.seed))
             tables = {"decisions": outcome.decisions, "labels": outcome.labels, "episodes": outcome.episodes,
                       "healthy_scores": pd.DataFrame({"score": outcome.healthy_scores})}
             if evaluation.nominal is not None:  # robustness: same method, same fleet without the drift
@@ -250,6 +251,24 @@ def evaluate_task(task: Task, *, limits: dict, method_seed: int = 0, cache_dir=N
 
     record["source_hash"] = source_hash(task.method)
     return record, tables
+
+
+def statistics(card, *, seed: int = 0, n_resamples: int = 1000) -> dict:
+    """Unit-bootstrap intervals of the headline KPIs and guilt calibration of a scored run.
+
+    Returns ``{"<kpi>_ci_low": ..., "<kpi>_ci_high": ..., "brier": ..., "ece": ...}``
+    (:func:`fuelhm_bench.scoring.bootstrap.scorecard_intervals`,
+    :func:`fuelhm_bench.scoring.calibration.guilt_calibration`).
+    """
+    from fuelhm_bench.scoring.bootstrap import scorecard_intervals
+    from fuelhm_bench.scoring.calibration import guilt_calibration
+
+    out = {}
+    for _, row in scorecard_intervals(card, n_resamples=n_resamples, random_state=seed).iterrows():
+        out[f"{row['kpi']}_ci_low"], out[f"{row['kpi']}_ci_high"] = row["ci_low"], row["ci_high"]
+    cal = guilt_calibration(card.flights)
+    out.update({"brier": cal["brier"], "ece": cal["ece"]})
+    return out
 
 
 # --------------------------------------------------------------------------- the run

@@ -18,9 +18,15 @@ import pandas as pd
 
 __all__ = ["board_table", "method_folder", "slug", "write_views"]
 
-_MD_COLUMNS = ("scenario", "seed", "method", "params", "status", "summary_score", "fpr_standard_thr",
-               "fnr_standard_thr", "fcr", "delay_censored_mean", "cost_kusd", "robustness", "fit_seconds",
-               "decide_seconds", "message")
+_MD_COLUMNS = ("scenario", "seed", "method", "params", "status", "summary_score", "summary_score_ci_low",
+               "summary_score_ci_high", "fpr_standard_thr", "fnr_standard_thr", "fcr", "brier",
+               "delay_censored_mean", "cost_kusd", "robustness", "robustness_delta_fpr", "robustness_delta_fnr",
+               "fit_seconds", "decide_seconds", "message")
+
+#: Files of a method's report linked from the page (label -> file name in its folder).
+_PAGE_LINKS = (("report", "result.json"), ("detection", "table_v_detection.md"),
+               ("scores", "score_distributions.png"), ("reliability", "reliability.png"),
+               ("intervals", "headline_intervals.csv"), ("log", "method.log"))
 
 
 def slug(text: str) -> str:
@@ -77,6 +83,13 @@ def write_views(store, out, tasks) -> pd.DataFrame:
         "# Leaderboard\n\nRanked by summary score (null method = 0, perfect = 100; docs/scoring.md). "
         "Generated from the results store; `params` are the entry's hyperparameters.\n\n"
         + to_markdown(view.round(3), float_format=".4g") + "\n")
+    from fuelhm_bench.benchmark.page import write_leaderboard_page
+
+    page = board.drop(columns=["method_params", "key"], errors="ignore").copy()
+    if len(page):
+        page["links"] = [{label: f"{folder}/{name}" for label, name in _PAGE_LINKS} for folder in page["folder"]]
+        page = page.drop(columns=["folder"])
+    write_leaderboard_page(page, out)  # index.html: links only to files that exist
     return board
 
 
@@ -118,6 +131,14 @@ def _method_report(store, out: Path, task) -> None:
         card = score_run(run)
         write_tables(card, mdir, overwrite=True)
         save_figure(plot_score_distributions(run, card.config), mdir / "score_distributions.png")
+        from fuelhm_bench.scoring.bootstrap import scorecard_intervals
+        from fuelhm_bench.scoring.calibration import guilt_calibration, plot_reliability
+
+        scorecard_intervals(card, n_resamples=1000, random_state=task.seed).to_csv(
+            mdir / "headline_intervals.csv", index=False)
+        reliability = guilt_calibration(card.flights)["reliability"]
+        reliability.to_csv(mdir / "reliability.csv", index=False)
+        save_figure(plot_reliability({task.method: reliability}), mdir / "reliability.png")
         decisions.to_csv(mdir / "decisions.csv", index=False)
         store.artifact(task.key, "episodes").to_csv(mdir / "episodes.csv", index=False)
         nominal = store.artifact(task.key, "nominal_decisions")
