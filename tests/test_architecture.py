@@ -13,9 +13,10 @@ PACKAGE = ROOT / "fuelhm_bench"
 
 #: Layers, lowest first. A module may import its own package and packages of strictly lower layers.
 LAYERS = (
-    ("errors", "taxonomy"),
+    ("errors", "taxonomy", "_numba_cache"),
     ("__init__",),
-    ("io", "physics", "indicators", "diagnosis", "methods"),
+    ("io", "physics", "indicators", "diagnosis"),
+    ("methods",),  # the method interface and its adapters use the diagnosis statistics
     ("flights", "scoring"),
     ("scenarios", "calibration"),
     ("datasets",),

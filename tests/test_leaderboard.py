@@ -46,4 +46,4 @@ def test_tiny_leaderboard_ranks_methods(tmp_path, tiny_scenario):
     # statistics in the outputs: unit-bootstrap intervals, guilt calibration, the page
     assert (ok["summary_score_ci_low"] <= ok["summary_score"]).all() and "brier" in board
     page = (out / "index.html").read_text()
-    assert "cannot load" in page and "summary_score" in page and 'id="cd-diagram"' in page
+    assert "Cannot import the method module" in page and "summary_score" in page and 'id="cd-diagram"' in page

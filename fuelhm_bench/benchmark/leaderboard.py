@@ -225,7 +225,8 @@ def evaluate_task(task: Task, *, limits: dict, method_seed: int = 0, cache_dir=N
             card = outcome.score()
             kp = headline_kpis(card)
             kp["cost_kusd"] = outcome.cost_kusd
-            kp.update(statistics(card, seed=task.seed))
+            for name, value in statistics(card, seed=task.seed).items():  # (Series.update ignores new keys)
+                kp[name] = value
             tables = {"decisions": outcome.decisions, "labels": outcome.labels, "episodes": outcome.episodes,
                       "healthy_scores": pd.DataFrame({"score": outcome.healthy_scores})}
             if evaluation.nominal is not None:  # robustness: same method, same fleet without the drift
