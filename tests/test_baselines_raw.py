@@ -35,7 +35,7 @@ def _raw(config):
 def flights():
     healthy = _raw(_fleet(4, 3, seed=1))
     test_healthy = _raw(_fleet(1, 3, seed=2))
-    leak = ModeSchedule("internal_leakage", growth="step", ramp_flights=1, max_intensity=1.0)
+    leak = ModeSchedule("null_bias_drift", growth="step", ramp_flights=1, max_intensity=1.0)
     faulty = _raw(_fleet(1, 3, (leak,), seed=2))
     return healthy, test_healthy, faulty
 
@@ -50,7 +50,8 @@ def test_features_worked_values():
     assert f[3] == pytest.approx(2.0, rel=1e-3) and f[4] < 1e-2
 
 
-def test_raw_method_separates_a_leaking_unit(flights):
+def test_raw_method_separates_a_degraded_unit(flights):
+    """A unit whose null bias drifted fully (physics v2: the 100 % leak is a small 7 cm3/s, see docs/physics.md §6)."""
     healthy, test_healthy, faulty = flights
     from fuelhm_bench.methods.checks import make_check_data
 

@@ -24,7 +24,7 @@ from sizes import DOE_UNITS, knowledge_size
 from sizes import tiny_scenario as tiny
 from submissions import Exits, Hangs, IdleCurrent, NaNScore, NotADecision, Peeks, Raises
 
-SIZE = KnowledgeSize(doe_units=DOE_UNITS)  # scenario_data(doe_units=DOE_UNITS) builds the same knowledge
+SIZE = KnowledgeSize(doe_units=DOE_UNITS)
 SMALL = knowledge_size()
 
 
@@ -59,7 +59,6 @@ def test_physics_runner_reproduces_the_table_pipeline(cache_dir):
     from fuelhm_bench.methods import run_table
 
     sc = tiny()
-    data, knowledge = scenario_data(sc, doe_units=DOE_UNITS)
     evaluation = prepare_evaluation(sc, fidelity="physics", knowledge_size=SIZE, cache_dir=cache_dir)
     columns = list(evaluation.fit_indicators.columns)  # the observation's columns (no n_points, quality_reason)
     assert columns == ["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES,
@@ -146,11 +145,9 @@ def test_progress_counts_every_scored_flight(surrogate_eval):
 
 
 def test_one_call_evaluate_with_progress_bars(cache_dir, tmp_path):
-    outcome = evaluate(IdleCurrent(), tiny(), fidelity="surrogate", knowledge_size=SMALL,
-                       cache_dir=cache_dir, progress=True)
     from tqdm import tqdm
 
-    outcome = evaluate(IdleCurrent(), tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(),
+    outcome = evaluate(IdleCurrent(), tiny(), fidelity="surrogate", knowledge_size=SMALL,
                        cache_dir=cache_dir, progress=tqdm)
     assert outcome.ok and len(outcome.decisions) == 24
     assert set(outcome.kpis().index) >= {"summary_score", "cost_kusd"}
