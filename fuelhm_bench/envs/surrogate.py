@@ -51,7 +51,10 @@ residuals are combined with fresh unit effects and responses, so whole
 flights are not repeated).
 
 What the surrogate does not reproduce: interactions between simultaneous
-modes (their responses add), any dependence of a mode's response on the
+modes (their responses add), flight-to-flight variation of a mode's response
+(the DOE flies one mission per unit, so a unit's response is the same on
+every flight at a given intensity: this is what backlash, whose limit cycle
+depends on the flight, misses most), any dependence of a mode's response on the
 unit's healthy state or on the flight's conditions beyond what the DOE unit
 drawn carries, correlation between consecutive flights of a unit beyond the
 shared unit effect, and unit effects that are far from Gaussian (their
