@@ -7,9 +7,10 @@ The environments and the runner need, for a scenario:
   from the benchmark's own simulations of the published model
   (:meth:`KnowledgeBuild.from_scenario <fuelhm_bench.datasets.knowledge.KnowledgeBuild.from_scenario>`);
 * **healthy indicator tables** of the scenario's training fleet
-  (:func:`training_indicators`): what methods are fitted on, and, continued to
-  more units and flights and with the scored fleet's drift, what the
-  surrogate's healthy Gaussian model is learnt on (:func:`surrogate_knowledge`);
+  (:func:`training_indicators`): what methods are fitted on;
+* what the **surrogate** is learnt from (:func:`surrogate_knowledge`): healthy
+  flights of new units of the scored fleet's model (:func:`surrogate_healthy`)
+  and a design of experiments on that model (:func:`surrogate_doe`);
 * the **scored fleet's indicators** without maintenance (:func:`scored_indicators`):
   the physics observations of replayed units, simulated once for all methods.
 

@@ -51,7 +51,10 @@ residuals are combined with fresh unit effects and responses, so whole
 flights are not repeated).
 
 What the surrogate does not reproduce: interactions between simultaneous
-modes (their responses add), any dependence of a mode's response on the
+modes (their responses add), flight-to-flight variation of a mode's response
+(the DOE flies one mission per unit, so a unit's response is the same on
+every flight at a given intensity: this is what backlash, whose limit cycle
+depends on the flight, misses most), any dependence of a mode's response on the
 unit's healthy state or on the flight's conditions beyond what the DOE unit
 drawn carries, correlation between consecutive flights of a unit beyond the
 shared unit effect, and unit effects that are far from Gaussian (their
@@ -242,7 +245,11 @@ class SurrogateModel:
         if q and not (np.all(np.diff(self.knots) > 0) and self.knots[0] > 0):
             raise DataFormatError(f"The 'knots' parameter of SurrogateModel must be increasing and > 0. "
                                   f"Got {self.knots.tolist()} instead.")
-        object.__setattr__(self, "_grid", np.concatenate([[0.0], self.knots]))
+        grid = np.concatenate([[0.0], self.knots])
+        # derived once for the draws (never part of the parameters): segment slopes, modes that lose indicators
+        object.__setattr__(self, "_grid", grid)
+        object.__setattr__(self, "_slopes", np.diff(self.responses, axis=2) / np.diff(grid)[None, None, :, None])
+        object.__setattr__(self, "_lossy", self.response_invalid.any(axis=(2, 3)))
 
     @classmethod
     def from_knowledge(cls, knowledge) -> SurrogateModel:
@@ -270,13 +277,19 @@ class SurrogateModel:
         return self.degrade(parts, intensities)
 
     def draw_parts(self, rng: np.random.Generator, n_flights: int) -> dict:
-        """The random parts of one unit: healthy flights, chosen DOE units, uniforms for invalid patterns."""
-        p = len(self.names)
-        z = rng.standard_normal(p)
-        rows = rng.integers(0, len(self.residuals), n_flights)
-        doe_units = rng.integers(0, self.responses.shape[0], len(self.modes))
-        uniforms = rng.random((n_flights, len(self.modes)))
-        healthy = self.mean + self.unit_factor @ z + self.residuals[rows]
+        """The random parts of one unit: healthy flights, chosen DOE units, uniforms for invalid patterns.
+
+        Two calls of ``rng``: ``standard_normal(p)`` (the unit effect) and
+        ``random(n_flights * (1 + len(modes)) + len(modes))`` (residual rows, DOE
+        units, invalid-pattern uniforms).
+        """
+        m = len(self.modes)
+        z = rng.standard_normal(len(self.names))
+        u = rng.random(n_flights * (1 + m) + m)
+        rows = (u[:n_flights] * len(self.residuals)).astype(np.intp)
+        doe_units = (u[n_flights:n_flights + m] * self.responses.shape[0]).astype(np.intp)
+        uniforms = u[n_flights + m:].reshape(n_flights, m)
+        healthy = (self.mean + self.unit_factor @ z) + self.residuals[rows]
         return {"healthy": healthy, "valid": self.residual_valid[rows], "doe_units": doe_units,
                 "uniforms": uniforms}
 
@@ -286,8 +299,8 @@ class SurrogateModel:
         Parameters
         ----------
         parts : dict
-            From :meth:`draw_parts` (any prefix of its flights may be passed by slicing
-            ``healthy``, ``valid`` and ``uniforms`` alike).
+            From :meth:`draw_parts` (any suffix of its flights may be passed by slicing
+            ``healthy``, ``valid`` and ``uniforms`` alike). Not modified.
         intensities : ndarray of shape (n, len(modes))
 
         Returns
@@ -296,23 +309,24 @@ class SurrogateModel:
             0 where invalid.
         valid : ndarray of shape (n, p), bool
         """
-        out = parts["healthy"].copy()
-        valid = parts["valid"].copy()
-        grid = self._grid
+        out = parts["healthy"]
+        valid = parts["valid"]
+        grid, slopes, lossy = self._grid, self._slopes, self._lossy
         last = len(grid) - 1
         intensities = np.asarray(intensities, dtype=np.float64)
-        if last == 0:  # no DOE intensity: no response known
-            return np.where(valid, out, 0.0), valid
-        for j in np.flatnonzero((intensities > 0).any(axis=0)):
-            f = intensities[:, j]
-            d = parts["doe_units"][j]
-            curve = self.responses[d, j]
-            # segment [grid[i0], grid[i0 + 1]]; beyond the largest knot the last segment continues (w > 1)
-            i0 = np.clip(np.searchsorted(grid, f, side="right") - 1, 0, last - 1)
-            w = (f - grid[i0]) / (grid[i0 + 1] - grid[i0])
-            out += (1.0 - w)[:, None] * curve[i0] + w[:, None] * curve[i0 + 1]
-            nearest = np.minimum(i0 + (parts["uniforms"][:, j] < w), last)
-            valid &= ~self.response_invalid[d, j, nearest]
+        if last:
+            for j in np.flatnonzero(intensities.max(axis=0) > 0):
+                f = intensities[:, j]
+                d = parts["doe_units"][j]
+                # segment [grid[i0], grid[i0 + 1]]; beyond the largest knot the last segment continues
+                i0 = np.searchsorted(grid, f, side="right") - 1
+                np.minimum(i0, last - 1, out=i0)
+                np.maximum(i0, 0, out=i0)
+                out = out + self.responses[d, j, i0] + (f - grid[i0])[:, None] * slopes[d, j, i0]
+                if lossy[d, j]:
+                    w = (f - grid[i0]) / (grid[i0 + 1] - grid[i0])
+                    nearest = np.minimum(i0 + (parts["uniforms"][:, j] < w), last)
+                    valid = valid & ~self.response_invalid[d, j, nearest]
         return np.where(valid, out, 0.0), valid
 
     # ------------------------------------------------------------------ summaries
