@@ -110,7 +110,9 @@ def _factor(matrix: np.ndarray) -> np.ndarray:
 def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray):
     """Mean, between-unit covariance, pooled residuals (0 where invalid) and their validity."""
     p = x.shape[1]
-    mean = np.nanmean(np.where(valid, x, np.nan), axis=0) if len(x) else np.full(p, np.nan)
+    n_valid = valid.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):  # an indicator never valid: NaN mean, no warning
+        mean = np.where(n_valid > 0, np.where(valid, x, 0.0).sum(axis=0) / n_valid, np.nan)
     labels, inverse = np.unique(units, return_inverse=True)
     k = len(labels)
     counts = np.zeros((k, p))

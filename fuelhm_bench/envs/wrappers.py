@@ -1,4 +1,4 @@
-"""Wrappers that make ``FuelHM/ActuationLoop-v0`` fit off-the-shelf RL libraries.
+"""Wrappers that make ``FuelHM/ActuationLoop-v1`` fit off-the-shelf RL libraries.
 
 * :class:`AlarmOnlyAction`: a ``Discrete(2)`` action (0 = no alarm, 1 = alarm)
   instead of the ``Dict`` action most agents (e.g. stable-baselines3 PPO)
@@ -17,7 +17,7 @@ Example::
     import fuelhm_bench.envs
     from fuelhm_bench.envs.wrappers import AlarmOnlyAction, NormalizedObservation
 
-    env = NormalizedObservation(AlarmOnlyAction(gym.make("FuelHM/ActuationLoop-v0",
+    env = NormalizedObservation(AlarmOnlyAction(gym.make("FuelHM/ActuationLoop-v1",
                                                          fidelity="surrogate")))
 """
 
@@ -86,9 +86,13 @@ def healthy_statistics(env: gym.Env) -> tuple[np.ndarray, np.ndarray]:
     base = env.unwrapped
     surrogate = getattr(base, "surrogate", None)
     if surrogate is not None:
-        cov = surrogate.unit_factor @ surrogate.unit_factor.T \
-            + surrogate.flight_factor @ surrogate.flight_factor.T
-        mean, std = np.asarray(surrogate.mean, float), np.sqrt(np.diag(cov))
+        # unit-to-unit variance (its Gaussian unit effect) + flight-to-flight variance (its resampled residuals)
+        idx = [list(surrogate.names).index(n) for n in INDICATOR_NAMES]
+        between = np.sum(np.asarray(surrogate.unit_factor, float)[idx] ** 2, axis=1)
+        res = np.where(np.asarray(surrogate.residual_valid, bool), np.asarray(surrogate.residuals, float), np.nan)[:, idx]
+        n_valid = np.isfinite(res).sum(axis=0)
+        within = np.where(n_valid > 1, np.nansum(res ** 2, axis=0) / np.maximum(n_valid - 1, 1), 0.0)
+        mean, std = np.asarray(surrogate.mean, float)[idx], np.sqrt(between + within)
     else:
         from fuelhm_bench.datasets.cache import training_indicators
 
