@@ -951,6 +951,12 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         if final_flags:
             unexplained += ("; absorbed by the recalibration: " + "; ".join(
                 f"unit {f.unit} {f.path} {f.z:+.1f} sigma" for f in final_flags))
+        partial = sorted((c for c in outcomes if c.effect != "none" and c.gap_reduction >= 0.2),
+                         key=lambda c: -c.gap_reduction)[:2]
+        if partial:
+            unexplained += ("; partial, not confident, explanations: " + "; ".join(
+                f"{c.label} " + ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
+                + f" ({100 * c.gap_reduction:.0f} % of the held-out gap, dBIC {c.delta_bic:.0f})" for c in partial))
         say(f"unexplained: {unexplained}")
         probe_fit, probe_model, v_probe = final_fit, final_model, v_after
         if final_flags:
