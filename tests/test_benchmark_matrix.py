@@ -41,17 +41,10 @@ def evaluations(tmp_path_factory):
                                      robustness=False, cache_dir=cache) for name in SCENARIOS}
 
 
-_LOW_DATA_XFAIL = {("low_data", "isolation-forest"), ("low_data", "itl-classifier")}
-
-
-@pytest.mark.slow  # 8 scenarios' data builds: about 25 s of CPU (minutes of wall time on the shared machine)
+# 8 scenarios x 9 baselines at small scale: 23 s on a quiet machine (one xdist worker)
 @pytest.mark.parametrize("scenario", SCENARIOS)
 @pytest.mark.parametrize("baseline", BASELINES)
-def test_every_baseline_runs_on_every_scenario(evaluations, scenario, baseline, request):
-    if (scenario, baseline) in _LOW_DATA_XFAIL:
-        request.applymarker(pytest.mark.xfail(
-            strict=True, reason="issue 10 §5: HealthyModel needs >= 11 healthy flights in the baseline's inner "
-                                "fit fold; the low_data baseline fix is i9a's"))
+def test_every_baseline_runs_on_every_scenario(evaluations, scenario, baseline):
     ev = evaluations[scenario]
     method = fuelhm_baselines.load(baseline)()
     method.fit(ev.fit_indicators, knowledge=ev.method_knowledge, random_state=0)
