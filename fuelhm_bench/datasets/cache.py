@@ -48,14 +48,12 @@ from pathlib import Path
 
 import pandas as pd
 
+from fuelhm_bench._numba_cache import CACHE_ENV_VAR  # the variable overriding the cache directory
 from fuelhm_bench.errors import ParameterError, parameter_error
 
 __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
            "knowledge_build", "published_knowledge", "resolve_scenario", "scored_indicators",
            "surrogate_doe", "surrogate_healthy", "surrogate_knowledge", "training_indicators"]
-
-#: Environment variable overriding the default cache directory.
-CACHE_ENV_VAR: str = "FUELHM_BENCH_CACHE"
 
 _FORMAT = 1
 _MEMORY: OrderedDict[str, object] = OrderedDict()
@@ -239,12 +237,11 @@ def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **par
 
 
 def default_cache_dir() -> Path:
-    """The cache directory used when none is given (see the module docstring)."""
-    env = os.environ.get(CACHE_ENV_VAR)
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "fuelhm-bench"
+    """The cache directory used when none is given: the project's user cache directory
+    (:func:`fuelhm_bench._numba_cache.user_cache_dir`, which also holds numba's caches)."""
+    from fuelhm_bench._numba_cache import user_cache_dir
+
+    return user_cache_dir()
 
 
 def clear_memory_cache() -> None:
