@@ -27,6 +27,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import abc
+
 import numpy as np
 import pandas as pd
 
@@ -64,11 +66,13 @@ class HealthyScoreDetector(BaseMethod):
     n_training_flights_ : int
     """
 
-    def _fit_scorer(self, z: np.ndarray, seed: int) -> Any:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _fit_scorer(self, z: np.ndarray, seed: int) -> Any:
+        """Fit the novelty model on standardised healthy indicators ``z``; return it."""
 
-    def _score(self, scorer: Any, z: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _score(self, scorer: Any, z: np.ndarray) -> np.ndarray:
+        """Abnormality of each row of ``z`` under ``scorer`` (higher = more abnormal)."""
 
     def _fit_all(self, x: np.ndarray, seed: int) -> tuple[HealthyModel, Any]:
         model = HealthyModel(min_flights=2).fit(x)  # only standardises: means and standard deviations

@@ -28,6 +28,7 @@ With a single training unit the calibration part is the last
 
 from __future__ import annotations
 
+import abc
 import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
@@ -120,11 +121,13 @@ class _DetectorAdapter(BaseMethod):
                           f"{type(self).__name__}.{self._detector_param}")
         return value
 
+    @abc.abstractmethod
     def _check_detector(self, detector: Any) -> None:
-        raise NotImplementedError
+        """Raise :class:`~fuelhm_bench.errors.ParameterError` unless ``detector`` is of the adapted kind."""
 
+    @abc.abstractmethod
     def _abnormality(self, model: Any, x: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        """Abnormality of each row of ``x`` under the fitted ``model`` (higher = more abnormal)."""
 
     # -- fit ---------------------------------------------------------------
     def _fit(self, healthy_indicators: pd.DataFrame, *, knowledge: Knowledge | None,
