@@ -34,12 +34,14 @@ INDICATOR_UNITS: dict[str, str] = {
 #: method unless asked for; exposed as extra columns with ``<name>_valid`` flags.
 EXTENDED_INDICATOR_NAMES: tuple[str, ...] = (
     "V_in1", "V_out1", "V_in3", "V_out3", "V_in7", "V_out7", "Vsd_null", "Idle_frac",
+    "Hys_lo", "Hys_hi", "I0_slope",
 )
 
 #: Units of the extended indicators (velocities in mm/s; ``Idle_frac`` is a fraction).
 EXTENDED_INDICATOR_UNITS: dict[str, str] = {
     "V_in1": "mm/s", "V_out1": "mm/s", "V_in3": "mm/s", "V_out3": "mm/s", "V_in7": "mm/s",
     "V_out7": "mm/s", "Vsd_null": "mm/s", "Idle_frac": "1",
+    "Hys_lo": "mA", "Hys_hi": "mA", "I0_slope": "mA/%",
 }
 
 #: The paper's ten followed by the extended indicators: every name a table may carry.

@@ -18,9 +18,10 @@ EXPECTED_COLUMNS = (
      "G_null"]
     + [f"{n}_valid" for n in ("X1", "Y1", "X2", "Y2", "Inb", "I0", "Hys0", "G_in", "G_out",
                               "G_null")]
-    + ["V_in1", "V_out1", "V_in3", "V_out3", "V_in7", "V_out7", "Vsd_null", "Idle_frac"]
+    + ["V_in1", "V_out1", "V_in3", "V_out3", "V_in7", "V_out7", "Vsd_null", "Idle_frac",
+       "Hys_lo", "Hys_hi", "I0_slope"]
     + [f"{n}_valid" for n in ("V_in1", "V_out1", "V_in3", "V_out3", "V_in7", "V_out7", "Vsd_null",
-                              "Idle_frac")]
+                              "Idle_frac", "Hys_lo", "Hys_hi", "I0_slope")]
     + ["n_points", "quality_reason"]
 )
 

@@ -106,7 +106,8 @@ def run_doe(doe: DesignOfExperiments, *, batch_size: int = 29, extraction=None,
         outs = simulate([j[4] for j in chunk], [j[5] for j in chunk],
                         [rng_for(doe.seed, _STREAM_DOE_NOISE, j[1]) for j in chunk],
                         labels=[f"DOE unit {j[1]}, {j[2]} at {j[3]:g}" for j in chunk])
-        flights = [_Flight(j[0], j[1], o.time_s, o.current_a * 1e3, o.measured_position_m * 1e3)
+        flights = [_Flight(j[0], j[1], o.time_s, o.current_a * 1e3, o.measured_position_m * 1e3,
+                           100.0 * j[5].n2_frac)
                    for j, o in zip(chunk, outs)]
         table = extract_table(flights, extraction, on_error="flag")
         table.insert(2, "mode", [j[2] for j in chunk])
@@ -124,3 +125,4 @@ class _Flight:
     time_s: np.ndarray
     current_ma: np.ndarray
     position_mm: np.ndarray
+    n2_pct: np.ndarray

@@ -115,11 +115,13 @@ class SimulatedFlight:
     output: SimOutput
 
     def as_flight_arrays(self):
-        """The recorded signals at the data boundary (mA, mm), as :class:`~fuelhm_bench.io.FlightArrays`."""
+        """The recorded signals at the data boundary (mA, mm; N2 in % as the extra ``n2_pct``),
+        as :class:`~fuelhm_bench.io.FlightArrays`."""
         from fuelhm_bench.io import FlightArrays
 
         return FlightArrays(self.flight_id, self.unit_id, self.output.time_s, self.output.current_a * 1e3,
-                            self.output.measured_position_m * 1e3)
+                            self.output.measured_position_m * 1e3,
+                            extras={"n2_pct": 100.0 * self.inputs.n2_frac})
 
 
 def build_units(config: FleetConfig) -> list[Unit]:

@@ -21,11 +21,16 @@ import numpy as np
 import pandas as pd
 
 from fuelhm_bench.errors import DataFormatError, ParameterError
-from fuelhm_bench.indicators.config import N_ACCUMULATORS, ExtractionConfig
+from fuelhm_bench.indicators.config import (
+    BAND_CELL_BINS,
+    N_ACCUMULATORS,
+    N_BAND_ACCUMULATORS,
+    ExtractionConfig,
+)
 from fuelhm_bench.indicators.curve import COUNTER_NAMES, VelocityGainCurve
 from fuelhm_bench.indicators.indicators import indicators_from_curve
-from fuelhm_bench.indicators.inputs import flight_label, validate_flight
-from fuelhm_bench.indicators.kernel import accumulate_flight
+from fuelhm_bench.indicators.inputs import flight_label, validate_flight, validate_n2
+from fuelhm_bench.indicators.kernel import accumulate_flight, band_cell_width_ma
 from fuelhm_bench.indicators.result import IndicatorResult, table_columns
 from fuelhm_bench.indicators.velocity import (
     CURRENT_LIMIT,
@@ -86,7 +91,8 @@ def _check_engine(engine: object, owner: str) -> None:
 
 def velocity_gain_curve(time_s: object, current_ma: object, position_mm: object,
                         config: ExtractionConfig | None = None, *, flight_id: object = None,
-                        engine: Literal["numba", "numpy"] = "numba") -> VelocityGainCurve:
+                        engine: Literal["numba", "numpy"] = "numba",
+                        n2_pct: object = None) -> VelocityGainCurve:
     """Binned velocity-gain curve of one recorded flight (batch).
 
     Parameters
@@ -106,6 +112,10 @@ def velocity_gain_curve(time_s: object, current_ma: object, position_mm: object,
         whole flight (fast); ``"numpy"`` is the independent vectorised reference
         implementation. Both give the same sums (tested to agree bit for bit on the
         platforms we run; the contract is agreement to 1e-12 relative).
+    n2_pct : array_like, optional
+        Engine HP speed N2, in %, one value per sample (NaN: missing sample). It sorts the idle
+        samples into the supply-pressure bands of the extended indicators ``Hys_lo``,
+        ``Hys_hi`` and ``I0_slope``; without it those three are invalid.
 
     Returns
     -------
@@ -115,7 +125,8 @@ def velocity_gain_curve(time_s: object, current_ma: object, position_mm: object,
     ------
     DataFormatError
         Mismatched lengths, fewer samples than one differentiator window, NaN/inf values,
-        time not strictly increasing, constant current, non-numeric input.
+        time not strictly increasing, constant current, non-numeric input, or a malformed
+        ``n2_pct``.
     ParameterError
         Unknown ``engine``.
     """
@@ -123,10 +134,12 @@ def velocity_gain_curve(time_s: object, current_ma: object, position_mm: object,
     cfg = ExtractionConfig() if config is None else config
     t, i, x = validate_flight(time_s, current_ma, position_mm, window=cfg.window_length,
                               flight_id=flight_id)
+    n2 = validate_n2(n2_pct, len(t), flight_id)
     zones = resolve_zones(cfg, i, x)
     if engine == "numba":
-        acc, counters = accumulate_flight(t, i, x, cfg, zones)
-        return VelocityGainCurve(config=cfg, accumulators=acc, counters=counters)
+        acc, counters, band = accumulate_flight(t, i, x, cfg, zones, n2)
+        return VelocityGainCurve(config=cfg, accumulators=acc, counters=counters,
+                                 band_accumulators=band)
     h = cfg.diff_half_width
     n = len(t)
     v, i_m = window_slope(t, x, h, i)
@@ -150,6 +163,18 @@ def velocity_gain_curve(time_s: object, current_ma: object, position_mm: object,
     acc[4] = np.bincount(k_idle, weights=v_u[idle], minlength=n_bins)
     acc[5] = np.bincount(k_idle, weights=di, minlength=n_bins)
     acc[6] = np.bincount(k_idle, weights=di * di, minlength=n_bins)
+    band = np.zeros((N_BAND_ACCUMULATORS, cfg.n_band_cells))
+    if n2 is not None:
+        n2_idle = n2[h:n - h][used][idle]
+        cell = k_idle // BAND_CELL_BINS
+        dc = i_c[idle] - (low + (cell + 0.5) * band_cell_width_ma(cfg))
+        n2_low, n2_high = cfg.pressure_bands_n2_pct
+        for r, in_band in ((0, n2_idle < n2_low), (4, n2_idle >= n2_high)):
+            j = cell[in_band]
+            band[r] = np.bincount(j, minlength=cfg.n_band_cells)
+            band[r + 1] = np.bincount(j, weights=dc[in_band], minlength=cfg.n_band_cells)
+            band[r + 2] = np.bincount(j, weights=dc[in_band] * dc[in_band], minlength=cfg.n_band_cells)
+            band[r + 3] = np.bincount(j, weights=n2_idle[in_band], minlength=cfg.n_band_cells)
     per_cat = np.bincount(cat, minlength=6)
     counters = dict.fromkeys(COUNTER_NAMES, 0)
     counters.update(n_samples=n, n_edge=2 * h, n_gap=per_cat[GAP], n_end_stop=per_cat[END_STOP],
@@ -157,12 +182,14 @@ def velocity_gain_curve(time_s: object, current_ma: object, position_mm: object,
                     n_fast_current=per_cat[FAST_CURRENT], n_used=per_cat[USED],
                     n_idle=int(idle.sum()))
     return VelocityGainCurve(config=cfg, accumulators=acc,
-                             counters=np.array([counters[c] for c in COUNTER_NAMES]))
+                             counters=np.array([counters[c] for c in COUNTER_NAMES]),
+                             band_accumulators=band)
 
 
 def extract_indicators(time_s: object, current_ma: object, position_mm: object,
                        config: ExtractionConfig | None = None, *, flight_id: object = None,
-                       engine: Literal["numba", "numpy"] = "numba") -> IndicatorResult:
+                       engine: Literal["numba", "numpy"] = "numba",
+                       n2_pct: object = None) -> IndicatorResult:
     """Indicators of one recorded flight (batch).
 
     Equivalent to ``indicators_from_curve(velocity_gain_curve(...))``.
@@ -177,6 +204,8 @@ def extract_indicators(time_s: object, current_ma: object, position_mm: object,
         Flight identifier used in error messages.
     engine : {"numba", "numpy"}, default="numba"
         Binning implementation (see :func:`velocity_gain_curve`).
+    n2_pct : array_like, optional
+        Engine HP speed N2 (%) per sample (see :func:`velocity_gain_curve`).
 
     Returns
     -------
@@ -197,8 +226,18 @@ def extract_indicators(time_s: object, current_ma: object, position_mm: object,
     (True, True)
     """
     curve = velocity_gain_curve(time_s, current_ma, position_mm, config, flight_id=flight_id,
-                                engine=engine)
+                                engine=engine, n2_pct=n2_pct)
     return indicators_from_curve(curve)
+
+
+def _recorded_n2(flight: object) -> object:
+    """A flight's N2 (%): its ``n2_pct`` attribute, else ``extras["n2_pct"]``, else None."""
+    n2 = getattr(flight, "n2_pct", None)
+    if n2 is None:
+        extras = getattr(flight, "extras", None)
+        if isinstance(extras, dict):
+            n2 = extras.get("n2_pct")
+    return n2
 
 
 def extract_table(flights: Iterable[object], config: ExtractionConfig | None = None, *,
@@ -210,8 +249,8 @@ def extract_table(flights: Iterable[object], config: ExtractionConfig | None = N
     ----------
     flights : iterable
         Objects with attributes ``flight_id``, ``time_s``, ``current_ma``, ``position_mm``
-        (NumPy arrays) and optionally ``unit_id`` (e.g.
-        ``fuelhm_bench.io.flights.FlightArrays``).
+        (NumPy arrays) and optionally ``unit_id`` and ``n2_pct`` (engine HP speed, %, per sample;
+        None or absent: not recorded) (e.g. ``fuelhm_bench.io.flights.FlightArrays``).
     config : ExtractionConfig, optional
         Extraction configuration (default :class:`ExtractionConfig()`).
     on_error : {"raise", "flag"}, default="raise"
@@ -264,7 +303,8 @@ def extract_table(flights: Iterable[object], config: ExtractionConfig | None = N
         has_unit = has_unit or unit_id is not None
         try:
             result = extract_indicators(flight.time_s, flight.current_ma, flight.position_mm,
-                                        cfg, flight_id=flight_id, engine=engine)
+                                        cfg, flight_id=flight_id, engine=engine,
+                                        n2_pct=_recorded_n2(flight))
         except DataFormatError as exc:
             if on_error == "raise":
                 raise

@@ -29,6 +29,16 @@ N_COUNTERS: int = 9
 #: Number of float64 scalars kept by the streaming extractor (current min and max).
 N_SCALARS: int = 2
 
+#: Rows of the supply-pressure band accumulators, per band (low, high): idle count, sum of
+#: ``i - c_j``, sum of ``(i - c_j)^2`` (``c_j`` the centre of the cell) and sum of N2 (%).
+N_BAND_ACCUMULATORS: int = 8
+
+#: Bins per cell of the band accumulators (0.5 mA cells with the default 0.05 mA bins).
+BAND_CELL_BINS: int = 10
+
+#: Rows of the streaming ring buffer: time, current, position, N2.
+N_RING_ROWS: int = 4
+
 
 def _param_error(name: str, allowed: str, given: object) -> ParameterError:
     """Build the project's uniform parameter error for :class:`ExtractionConfig`."""
@@ -136,6 +146,14 @@ class ExtractionConfig:
         with a weak slope change can give most of a mA).
     coarse_grid_size : int, default=24
         Number of candidate breakpoint positions in the exhaustive coarse search of the fit.
+    pressure_bands_n2_pct : tuple of float, default=(70.0, 80.0)
+        Engine HP speed N2 (%) that bounds the two supply-pressure bands of the extended
+        indicators ``Hys_lo``, ``Hys_hi`` and ``I0_slope``: idle samples with ``N2 < low`` form the
+        low-pressure band (ground idle, taxi, descent), those with ``N2 >= high`` the
+        high-pressure band (climb, cruise). The supply pressure rise follows ``N2**2``
+        (:class:`~fuelhm_bench.physics.fluid.FluidParams`), so the default bands differ by a
+        factor of about 1.9 in supply pressure. Samples between them (and every sample of a
+        flight without recorded N2) are in neither band.
 
     Attributes
     ----------
@@ -179,11 +197,13 @@ class ExtractionConfig:
     min_null_halfwidth_ma: float = 0.25
     max_breakpoint_interval_ma: float = 0.4
     coarse_grid_size: int = 24
+    pressure_bands_n2_pct: tuple[float, float] = (70.0, 80.0)
 
     def __post_init__(self) -> None:
         _check_pair("current_range_ma", self.current_range_ma, optional=False)
         _check_pair("stroke_limits_mm", self.stroke_limits_mm, optional=True)
         _check_pair("current_limits_ma", self.current_limits_ma, optional=True)
+        _check_pair("pressure_bands_n2_pct", self.pressure_bands_n2_pct, optional=False)
         positive = ("bin_width_ma", "max_frame_s", "idle_velocity_mm_s", "idle_halfwidth_ma",
                     "max_breakpoint_interval_ma")
         for name in positive:
@@ -230,9 +250,9 @@ class ExtractionConfig:
                 self.bin_width_ma,
             )
         if self.streaming_state_nbytes > STREAMING_STATE_BUDGET_BYTES:
-            max_bins = (STREAMING_STATE_BUDGET_BYTES - self._fixed_state_nbytes) // (
-                8 * N_ACCUMULATORS
-            )
+            per_bin = 8 * N_ACCUMULATORS + 8 * N_BAND_ACCUMULATORS / BAND_CELL_BINS
+            max_bins = int((STREAMING_STATE_BUDGET_BYTES - self._fixed_state_nbytes
+                            - 8 * N_BAND_ACCUMULATORS) // per_bin)
             raise _param_error(
                 "bin_width_ma",
                 f"large enough for at most {max_bins} bins over {self.current_range_ma!r} mA "
@@ -263,13 +283,25 @@ class ExtractionConfig:
 
     @property
     def _fixed_state_nbytes(self) -> int:
-        ring = 3 * 2 * self.diff_half_width * 8
+        ring = N_RING_ROWS * 2 * self.diff_half_width * 8
         return ring + N_COUNTERS * 8 + N_SCALARS * 8
+
+    @property
+    def n_band_cells(self) -> int:
+        """Number of cells of the supply-pressure band accumulators (``BAND_CELL_BINS`` bins each)."""
+        return -(-self.n_bins // BAND_CELL_BINS)
+
+    @property
+    def band_cell_centres_ma(self) -> np.ndarray:
+        """Centres of the band cells ``low + (j + 0.5) * BAND_CELL_BINS * bin_width_ma``, in mA."""
+        cell_w = BAND_CELL_BINS * self.bin_width_ma
+        return self.current_range_ma[0] + (np.arange(self.n_band_cells) + 0.5) * cell_w
 
     @property
     def streaming_state_nbytes(self) -> int:
         """Bytes of array state of a streaming extractor with this configuration."""
-        return N_ACCUMULATORS * self.n_bins * 8 + self._fixed_state_nbytes
+        return ((N_ACCUMULATORS * self.n_bins + N_BAND_ACCUMULATORS * self.n_band_cells) * 8
+                + self._fixed_state_nbytes)
 
     @classmethod
     def for_frame_rate(cls, rate_hz: float, window_s: float = 0.04,

@@ -17,6 +17,11 @@ masked, current inside the bin range):
   idle candidates (mA, mA^2). Deviations from the bin centre keep the variance of the idle
   current free of cancellation.
 
+Per cell ``j`` of ``BAND_CELL_BINS`` bins (centre ``c_j``) and per supply-pressure band (low:
+``N2 < pressure_bands_n2_pct[0]``, high: ``N2 >= pressure_bands_n2_pct[1]``), the *band
+accumulators* hold, over the idle candidates of that band: their number, the sums of ``i - c_j``
+and of ``(i - c_j)^2`` (mA, mA^2) and the sum of N2 (%) (zero when N2 was not recorded).
+
 Two local means follow: over all samples (:attr:`VelocityGainCurve.mean_velocity_mm_s`, the
 paper's smoothed curve, dominated near ``I0`` by the resting samples) and over the *moving*
 samples only (:attr:`VelocityGainCurve.moving_mean_velocity_mm_s`, what the slope changes are
@@ -32,7 +37,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from fuelhm_bench.errors import ParameterError, UnknownNameError
-from fuelhm_bench.indicators.config import N_ACCUMULATORS, ExtractionConfig
+from fuelhm_bench.indicators.config import (
+    BAND_CELL_BINS,
+    N_ACCUMULATORS,
+    N_BAND_ACCUMULATORS,
+    ExtractionConfig,
+)
 
 #: Names of the per-sample bookkeeping counters, in storage order.
 COUNTER_NAMES: tuple[str, ...] = (
@@ -62,6 +72,10 @@ class VelocityGainCurve:
         (counts are exact integers up to 2**53).
     counters : numpy.ndarray of shape (9,)
         int64 bookkeeping counters, in the order of :data:`COUNTER_NAMES`.
+    band_accumulators : numpy.ndarray of shape (8, n_band_cells) or None, default=None
+        Supply-pressure band rows, low band then high band, each ``idle_count``,
+        ``idle_sum_di`` (mA), ``idle_sum_di2`` (mA^2), ``idle_sum_n2`` (%), over cells of
+        ``BAND_CELL_BINS`` bins; None: all zero (N2 not recorded).
 
     Attributes
     ----------
@@ -87,10 +101,21 @@ class VelocityGainCurve:
     config: ExtractionConfig
     accumulators: np.ndarray
     counters: np.ndarray
+    band_accumulators: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         acc = np.array(self.accumulators, dtype=np.float64, copy=True)
         cnt = np.array(self.counters, dtype=np.int64, copy=True)
+        band_shape = (N_BAND_ACCUMULATORS, self.config.n_band_cells)
+        band = (np.zeros(band_shape) if self.band_accumulators is None
+                else np.array(self.band_accumulators, dtype=np.float64, copy=True))
+        if band.shape != band_shape:
+            raise ParameterError(
+                f"The 'band_accumulators' parameter of VelocityGainCurve must be None or have "
+                f"shape {band_shape}. Got {band.shape} instead."
+            )
+        band.setflags(write=False)
+        object.__setattr__(self, "band_accumulators", band)
         if acc.shape != (N_ACCUMULATORS, self.config.n_bins) or cnt.shape != (
                 len(COUNTER_NAMES),):
             raise ParameterError(
@@ -142,6 +167,31 @@ class VelocityGainCurve:
     def idle_sum_di2(self) -> np.ndarray:
         """Sum of ``(i - c_k)^2`` over the idle candidates of each bin, in mA^2."""
         return self.accumulators[6]
+
+    def band_rows(self, band: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The band accumulator rows of one supply-pressure band.
+
+        Parameters
+        ----------
+        band : {"low", "high"}
+            Low (``N2 < pressure_bands_n2_pct[0]``) or high (``N2 >= pressure_bands_n2_pct[1]``)
+            supply pressure.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            ``(idle_count, idle_sum_di, idle_sum_di2, idle_sum_n2)`` per cell (mA, mA^2, %).
+
+        Raises
+        ------
+        UnknownNameError
+            If ``band`` is neither ``"low"`` nor ``"high"``.
+        """
+        if band not in ("low", "high"):
+            raise UnknownNameError(f"Unknown band {band!r}; the bands are 'low' and 'high'.")
+        r = 0 if band == "low" else 4
+        b = self.band_accumulators
+        return b[r], b[r + 1], b[r + 2], b[r + 3]
 
     @property
     def moving_count(self) -> np.ndarray:
@@ -228,23 +278,80 @@ def idle_statistics(curve: VelocityGainCurve, config: ExtractionConfig | None = 
     exactly from the per-bin sums of ``i - c_k``: ``M2 = sum_k (S2_k - S1_k**2 / n_k) +
     sum_k n_k (mean_k - mean)**2``.
     """
+    sl = idle_window(curve, config)
+    if sl is None:
+        return math.nan, math.nan, 0
+    mean, std, n_tot, _ = _pooled(curve.idle_count[sl], curve.idle_sum_di[sl],
+                                  curve.idle_sum_di2[sl], curve.bin_centres_ma[sl])
+    return mean, std, n_tot
+
+
+def idle_window(curve: VelocityGainCurve, config: ExtractionConfig | None = None) -> slice | None:
+    """The bins of the idle window, ``k_med - H .. k_med + H`` (see :func:`idle_statistics`).
+
+    Returns
+    -------
+    slice or None
+        Bin slice (clipped to the bin range); None when there is no idle candidate.
+    """
     cfg = curve.config if config is None else config
     n_k = curve.idle_count
     total = float(n_k.sum())
     if total <= 0:
-        return math.nan, math.nan, 0
+        return None
     k_med = int(np.searchsorted(np.cumsum(n_k), 0.5 * total))
     half = int(math.floor(cfg.idle_halfwidth_ma / curve.config.bin_width_ma + 1e-9))
-    sl = slice(max(k_med - half, 0), min(k_med + half + 1, len(n_k)))
-    n = n_k[sl]
+    return slice(max(k_med - half, 0), min(k_med + half + 1, len(n_k)))
+
+
+def _pooled(n: np.ndarray, s1: np.ndarray, s2: np.ndarray, c: np.ndarray,
+            extra: np.ndarray | None = None) -> tuple[float, float, int, float]:
+    """Mean, population std and count of values kept as per-group sums of ``v - c``.
+
+    ``extra`` (optional) is a per-group sum of another quantity whose overall mean is returned
+    as the fourth element (NaN without it).
+    """
     occupied = n > 0
+    if not occupied.any():
+        return math.nan, math.nan, 0, math.nan
     n = n[occupied]
-    s1 = curve.idle_sum_di[sl][occupied]
-    s2 = curve.idle_sum_di2[sl][occupied]
-    c = curve.bin_centres_ma[sl][occupied]
+    s1 = s1[occupied]
+    s2 = s2[occupied]
+    c = c[occupied]
     n_tot = float(n.sum())
     mean_k = c + s1 / n
     mean = float((n * mean_k).sum() / n_tot)
     within = np.maximum(s2 - s1 * s1 / n, 0.0)
     m2 = float(within.sum() + (n * (mean_k - mean) ** 2).sum())
-    return mean, math.sqrt(m2 / n_tot), int(n_tot)
+    extra_mean = math.nan if extra is None else float(extra[occupied].sum() / n_tot)
+    return mean, math.sqrt(m2 / n_tot), int(n_tot), extra_mean
+
+
+def band_statistics(curve: VelocityGainCurve, band: str, config: ExtractionConfig | None = None
+                    ) -> tuple[float, float, int, float]:
+    """Idle current and its spread within one supply-pressure band.
+
+    Parameters
+    ----------
+    curve : VelocityGainCurve
+        Binned curve with its band accumulators.
+    band : {"low", "high"}
+        Supply-pressure band (see :meth:`VelocityGainCurve.band_rows`).
+    config : ExtractionConfig, optional
+        Supplies ``idle_halfwidth_ma``; defaults to the curve's configuration.
+
+    Returns
+    -------
+    tuple
+        ``(mean, std, n, n2_mean)``: mean control current (mA), population standard deviation
+        (mA), number of samples and mean N2 (%) of the band's idle candidates in the cells
+        that overlap the idle window of :func:`idle_statistics` (cells of ``BAND_CELL_BINS``
+        bins: the window rounded out to whole cells). ``(nan, nan, 0, nan)`` when there is none.
+    """
+    count, s1, s2, sn2 = curve.band_rows(band)
+    sl = idle_window(curve, config)
+    if sl is None:
+        return math.nan, math.nan, 0, math.nan
+    cells = slice(sl.start // BAND_CELL_BINS, (sl.stop - 1) // BAND_CELL_BINS + 1)
+    return _pooled(count[cells], s1[cells], s2[cells], curve.config.band_cell_centres_ma[cells],
+                   sn2[cells])

@@ -202,7 +202,8 @@ def indicators_from_curve(curve: VelocityGainCurve,
                       Inb=0.5 * (fit.x1_ma + fit.x2_ma))
         valid.update(X1=ok1, Y1=ok1, G_in=ok1, X2=ok2, Y2=ok2, G_out=ok2, G_null=null_ok,
                      Inb=ok1 and ok2)
-    ext_values, ext_valid, ext_reasons = extended_from_curve(curve, i0, valid["I0"], cfg.min_idle_points)
+    ext_values, ext_valid, ext_reasons = extended_from_curve(curve, i0, valid["I0"], cfg.min_idle_points,
+                                                           cfg)
     return IndicatorResult(values=values, valid=valid, reasons=tuple(reasons),
                            n_points=curve.n_points, fit=fit, n_idle=n_idle, extended_values=ext_values,
                            extended_valid=ext_valid, extended_reasons=tuple(ext_reasons))

@@ -105,6 +105,48 @@ def constant_current_message(value: float, n_samples: int, flight_id: object) ->
     )
 
 
+def validate_n2(n2_pct: object, n_samples: int, flight_id: object) -> np.ndarray | None:
+    """Convert and check the optional engine HP speed N2 of a flight (or chunk).
+
+    Parameters
+    ----------
+    n2_pct : array_like or None
+        N2 in percent, one value per sample; None when the flight does not record it. NaN marks
+        a missing sample (it joins no supply-pressure band); infinite values are refused.
+    n_samples : int
+        Number of samples of the other arrays.
+    flight_id : object
+        Flight identifier for messages.
+
+    Returns
+    -------
+    numpy.ndarray or None
+        Contiguous float64 N2 (%), or None.
+
+    Raises
+    ------
+    DataFormatError
+        Non-numeric or multi-dimensional input, a length other than ``n_samples``, or an
+        infinite value.
+    """
+    if n2_pct is None:
+        return None
+    n2 = as_1d_float(n2_pct, "n2_pct", flight_id)
+    if len(n2) != n_samples:
+        raise DataFormatError(
+            f"{flight_label(flight_id)}: 'n2_pct' must have one value per sample ({n_samples}); "
+            f"got {len(n2)}."
+        )
+    bad = np.isinf(n2)
+    if bad.any():
+        idx = int(np.argmax(bad))
+        raise DataFormatError(
+            f"{flight_label(flight_id)}: 'n2_pct' contains an infinite value ({float(n2[idx])!r}) at "
+            f"sample {idx}; use NaN for a missing N2 sample."
+        )
+    return n2
+
+
 def validate_flight(time_s: object, current_ma: object, position_mm: object, *,
                     window: int, flight_id: object = None
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

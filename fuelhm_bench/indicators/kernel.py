@@ -12,7 +12,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fuelhm_bench.indicators.config import N_ACCUMULATORS, N_COUNTERS, ExtractionConfig
+from fuelhm_bench.indicators.config import (
+    BAND_CELL_BINS,
+    N_ACCUMULATORS,
+    N_BAND_ACCUMULATORS,
+    N_COUNTERS,
+    ExtractionConfig,
+)
 from fuelhm_bench.indicators.curve import COUNTER_NAMES
 
 
@@ -37,13 +43,16 @@ def check_chunk(t, cur, x, t_prev, has_prev):
 
 
 @njit(cache=True, nogil=True)
-def accumulate(t, cur, x, c_start, c_stop, h, low, inv_w, width, n_bins, x_low, x_high,
-               i_low, i_high, max_frame, max_rate, v_idle, acc, counters):
+def accumulate(t, cur, x, n2, c_start, c_stop, h, low, inv_w, width, n_bins, x_low, x_high,
+               i_low, i_high, max_frame, max_rate, v_idle, n2_low, n2_high, cell_bins, cell_w,
+               acc, counters, band_acc):
     """Differentiate, mask, bin and accumulate the centres c_start..c_stop-1 of (t, cur, x).
 
     Same formulas (velocity and matched current), order of operations and mask priority as
     ``velocity.window_slope`` and ``velocity.classify_samples``; counters are indexed as
-    ``curve.COUNTER_NAMES``.
+    ``curve.COUNTER_NAMES``. An idle candidate whose centre sample has ``n2 < n2_low`` (%)
+    also enters the low-pressure band rows 0-3 of ``band_acc``, one with ``n2 >= n2_high``
+    the high-pressure rows 4-7, at cell ``b // cell_bins`` (a NaN N2 enters neither).
     """
     n_w = float(2 * h + 1)
     for c in range(c_start, c_stop):
@@ -109,6 +118,19 @@ def accumulate(t, cur, x, c_start, c_stop, h, low, inv_w, width, n_bins, x_low, 
             acc[4, b] += v
             acc[5, b] += d
             acc[6, b] += d * d
+            nc = n2[c]
+            r = -1
+            if nc < n2_low:
+                r = 0
+            elif nc >= n2_high:
+                r = 4
+            if r >= 0:
+                j = b // cell_bins
+                dc = i - (low + (j + 0.5) * cell_w)
+                band_acc[r, j] += 1.0
+                band_acc[r + 1, j] += dc
+                band_acc[r + 2, j] += dc * dc
+                band_acc[r + 3, j] += nc
 
 
 def sample_kernel_args(config: ExtractionConfig, zones: tuple[float, float, float, float]
@@ -126,18 +148,26 @@ def sample_kernel_args(config: ExtractionConfig, zones: tuple[float, float, floa
     -------
     tuple
         ``(h, low, inv_w, width, n_bins, x_low, x_high, i_low, i_high, max_frame, max_rate,
-        v_idle)``.
+        v_idle, n2_low, n2_high, cell_bins, cell_w)``.
     """
     max_rate = np.inf if config.max_current_rate_ma_s is None else config.max_current_rate_ma_s
+    n2_low, n2_high = config.pressure_bands_n2_pct
     return (config.diff_half_width, float(config.current_range_ma[0]),
             1.0 / config.bin_width_ma, float(config.bin_width_ma), config.n_bins,
             *(float(z) for z in zones), float(config.max_frame_s), float(max_rate),
-            float(config.idle_velocity_mm_s))
+            float(config.idle_velocity_mm_s), float(n2_low), float(n2_high), BAND_CELL_BINS,
+            band_cell_width_ma(config))
+
+
+def band_cell_width_ma(config: ExtractionConfig) -> float:
+    """Width of a cell of the band accumulators, ``BAND_CELL_BINS * bin_width_ma``, in mA."""
+    return BAND_CELL_BINS * float(config.bin_width_ma)
 
 
 def accumulate_flight(time_s: np.ndarray, current_ma: np.ndarray, position_mm: np.ndarray,
-                      config: ExtractionConfig, zones: tuple[float, float, float, float]
-                      ) -> tuple[np.ndarray, np.ndarray]:
+                      config: ExtractionConfig, zones: tuple[float, float, float, float],
+                      n2_pct: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Binned sums and counters of a whole validated flight with the compiled kernel.
 
     Parameters
@@ -148,19 +178,24 @@ def accumulate_flight(time_s: np.ndarray, current_ma: np.ndarray, position_mm: n
         Extraction configuration.
     zones : tuple of float
         Output of :func:`fuelhm_bench.indicators.velocity.resolve_zones`.
+    n2_pct : numpy.ndarray or None, default=None
+        Validated engine HP speed N2 (%) per sample (NaN allowed: in no band); None: not
+        recorded (the band accumulators stay empty).
 
     Returns
     -------
     tuple of numpy.ndarray
-        ``accumulators`` (7, n_bins) and ``counters`` (9,), as in
-        :class:`~fuelhm_bench.indicators.VelocityGainCurve`.
+        ``accumulators`` (7, n_bins), ``counters`` (9,) and ``band_accumulators``
+        (8, n_band_cells), as in :class:`~fuelhm_bench.indicators.VelocityGainCurve`.
     """
     n = len(time_s)
     h = config.diff_half_width
     acc = np.zeros((N_ACCUMULATORS, config.n_bins))
+    band = np.zeros((N_BAND_ACCUMULATORS, config.n_band_cells))
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
-    accumulate(time_s, current_ma, position_mm, h, n - h, *sample_kernel_args(config, zones),
-               acc, counters)
+    n2 = np.full(n, np.nan) if n2_pct is None else n2_pct
+    accumulate(time_s, current_ma, position_mm, n2, h, n - h, *sample_kernel_args(config, zones),
+               acc, counters, band)
     counters[COUNTER_NAMES.index("n_samples")] = n
     counters[COUNTER_NAMES.index("n_edge")] = 2 * h
-    return acc, counters
+    return acc, counters, band
