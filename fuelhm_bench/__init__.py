@@ -8,4 +8,4 @@ __version__ = "0.1.0"
 
 __all__ = ["EFFECT_IDS", "INDICATOR_NAMES", "INDICATOR_UNITS", "MODE_IDS", "__version__"]
 
-from fuelhm_bench import envs  # noqa: E402,F401 - registers FuelHM/ActuationLoop-v1 with gymnasium
+from fuelhm_bench import envs  # noqa: E402,F401 - registers FuelHM/ActuationLoop-v2 with gymnasium

@@ -1,4 +1,4 @@
-"""FuelHM/ActuationLoop-v1: conformance (check_env on every id x shipped scenario x fidelity), determinism,
+"""FuelHM/ActuationLoop-v2: conformance (check_env on every id x shipped scenario x fidelity), determinism,
 vectorisation, pickling, the cost model, truth handling, the surrogate against the physics, the knowledge
 cache and bad input.
 
@@ -23,15 +23,15 @@ from gymnasium.utils.env_checker import check_env
 
 import fuelhm_bench.envs  # noqa: F401 - registers the environment ids
 from fuelhm_bench.envs import KnowledgeSize
-from fuelhm_bench.envs.actuation_loop import INDICATOR_BOUNDS, ActuationLoopEnv
+from fuelhm_bench.envs.actuation_loop import EXTENDED_INDICATOR_BOUNDS, INDICATOR_BOUNDS, ActuationLoopEnv
 from fuelhm_bench.datasets.cache import (cache_key, clear_memory_cache, default_cache_dir, published_knowledge,
                                      surrogate_knowledge, training_indicators)
-from fuelhm_bench.errors import ParameterError, UnknownNameError
+from fuelhm_bench.errors import DataFormatError, ParameterError, UnknownNameError
 from sizes import FLIGHT_MINUTES, TINY_FLIGHTS, TINY_UNITS, knowledge_size
 from fuelhm_bench.scenarios import CostSpec, DegradationSpec, list_scenarios, load_scenario
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS
 
-ENV_ID = "FuelHM/ActuationLoop-v1"
+ENV_ID = "FuelHM/ActuationLoop-v2"
 ENV_IDS = sorted(i for i in gym.registry if i.startswith("FuelHM/"))
 MINUTES = FLIGHT_MINUTES
 SMALL = knowledge_size()
@@ -93,10 +93,10 @@ def step_fault(mode, onset, *, growth="step", ramp=1):
 def test_registration_is_lazy_and_idempotent():
     code = ("import sys, gymnasium as gym, fuelhm_bench.envs as e; e.register_envs(); "
             "assert 'fuelhm_bench.envs.actuation_loop' not in sys.modules; "
-            "assert gym.spec('FuelHM/ActuationLoop-v1').entry_point.endswith(':ActuationLoopEnv'); print('ok')")
+            "assert gym.spec('FuelHM/ActuationLoop-v2').entry_point.endswith(':ActuationLoopEnv'); print('ok')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
-    assert ENV_IDS == ["FuelHM/ActuationLoop-v1"]
+    assert ENV_IDS == ["FuelHM/ActuationLoop-v2"]
 
 
 @pytest.mark.parametrize("fidelity", ["physics", "surrogate"])
@@ -111,13 +111,14 @@ def test_check_env_every_id_scenario_and_fidelity(cache_dir, env_id, scenario, f
 
 
 def test_unknown_version_names_the_current_one():
-    with pytest.raises(gym.error.Error, match="v1"):
-        gym.make("FuelHM/ActuationLoop-v2")
+    with pytest.raises(gym.error.Error, match="v2"):
+        gym.make("FuelHM/ActuationLoop-v3")
 
 
-def test_retired_version_names_the_current_one():
-    with pytest.raises(gym.error.DeprecatedEnv, match=r"v0.*deprecated.*FuelHM/ActuationLoop-v1"):
-        gym.make("FuelHM/ActuationLoop-v0")
+@pytest.mark.parametrize("retired", ["v0", "v1"])
+def test_retired_version_names_the_current_one(retired):
+    with pytest.raises(gym.error.DeprecatedEnv, match=rf"{retired}.*deprecated.*FuelHM/ActuationLoop-v2"):
+        gym.make(f"FuelHM/ActuationLoop-{retired}")
 
 
 def test_make_with_module_prefix_and_path(cache_dir, tmp_path):
@@ -125,7 +126,7 @@ def test_make_with_module_prefix_and_path(cache_dir, tmp_path):
 
     path = tmp_path / "mine.yaml"
     path.write_text(yaml.safe_dump(small_scenario(name="mine").to_dict(), sort_keys=False))
-    env = gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v1", scenario=str(path), fidelity="physics",
+    env = gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v2", scenario=str(path), fidelity="physics",
                    flight_minutes=MINUTES)
     assert env.unwrapped.scenario.name == "mine"
     assert env.unwrapped.n_flights == 8
@@ -168,6 +169,10 @@ def test_physics_replay_is_the_scenarios_fleet(cache_dir):
         got = np.array([np.where(o["valid"] == 1, o["indicators"], np.nan) for o in observations])
         want = table.loc[table["unit_id"] == k, list(INDICATOR_NAMES)].to_numpy()
         np.testing.assert_array_equal(got, want.astype(np.float32))
+        got = np.array([np.where(o["extended_valid"] == 1, o["extended"], np.nan) for o in observations])
+        want = table.loc[table["unit_id"] == k, list(EXTENDED_INDICATOR_NAMES)].to_numpy(dtype=np.float64)
+        np.testing.assert_array_equal(got, np.clip(want, *np.array(list(EXTENDED_INDICATOR_BOUNDS.values())).T)
+                                      .astype(np.float32))
         truth = info["episode_truth"]
         lab = labels[labels["unit_id"] == k]
         for j, m in enumerate(MODE_IDS):
@@ -179,8 +184,9 @@ def test_physics_replay_is_the_scenarios_fleet(cache_dir):
         live, rewards, info = episode(env, ALARM, options={"unit": k})
         loaded, rewards2, info2 = episode(served, ALARM, options={"unit": k})
         for a, b in zip(live, loaded):
-            np.testing.assert_array_equal(a["indicators"], b["indicators"])
-            np.testing.assert_array_equal(a["valid"], b["valid"])
+            assert set(a) == set(b)
+            for key in a:
+                np.testing.assert_array_equal(a[key], b[key])
         assert rewards == rewards2
         np.testing.assert_array_equal(info["episode_truth"]["cost_kusd"], info2["episode_truth"]["cost_kusd"])
 
@@ -195,6 +201,8 @@ def test_load_replays_refuses_what_it_cannot_serve(cache_dir):
     with pytest.raises(ParameterError, match="needs fidelity='physics', maintenance=False"):
         make(cache_dir, sc, "surrogate", maintenance=False).unwrapped.load_replays(table)
     env = make(cache_dir, sc, "physics", maintenance=False).unwrapped
+    with pytest.raises(ParameterError, match=r"must hold the columns of every observed indicator.*'Hys_lo'"):
+        env.load_replays(table.drop(columns=["Hys_lo"]))
     with pytest.raises(ParameterError, match=r"flights 0..2 of each unit. Got \[0, 2\] for unit 1"):
         env.load_replays(table.drop(index=4))
 
@@ -295,10 +303,10 @@ def test_repair_restores_healthy_surrogate_indicators(cache_dir):
 def test_truth_only_at_the_end_unless_evaluation(cache_dir):
     env = make(cache_dir, small_scenario("all_modes", flights=5), "surrogate")
     obs, info = env.reset(seed=0)
-    assert set(obs) == {"indicators", "valid"} and set(info) == {"flight_index", "unit"}
+    assert set(obs) == {"indicators", "valid", "extended", "extended_valid"} and set(info) == {"flight_index", "unit"}
     for t in range(5):
         obs, reward, terminated, _, info = env.step(NO_ALARM)
-        assert set(obs) == {"indicators", "valid"}
+        assert set(obs) == {"indicators", "valid", "extended", "extended_valid"}
         assert set(info) == ({"flight_index", "episode_truth"} if terminated else {"flight_index"})
     obs, info = env.reset(seed=0, options={"evaluation": True})
     assert set(info["truth"]) == {"intensity", "max_intensity", "onset", "detectable", "failure"}
@@ -477,9 +485,35 @@ def test_step_without_a_running_episode(cache_dir):
 
 def test_observation_bounds_are_finite_and_documented():
     env_doc = ActuationLoopEnv.__doc__
-    for name, (low, high) in INDICATOR_BOUNDS.items():
+    for name, (low, high) in {**INDICATOR_BOUNDS, **EXTENDED_INDICATOR_BOUNDS}.items():
         assert np.isfinite(low) and np.isfinite(high) and low < high
-        assert f"| {name}" in env_doc
+        assert f"| {name}" in env_doc or f" {name}," in env_doc
+    assert tuple(EXTENDED_INDICATOR_BOUNDS) == EXTENDED_INDICATOR_NAMES
     for section in ("## Action Space", "## Observation Space", "## Rewards", "## Starting State", "## Episode End",
                     "## Arguments", "## Version History"):
         assert section in env_doc
+
+
+@pytest.mark.parametrize("fidelity", ["physics", "surrogate"])
+def test_extended_observation(cache_dir, fidelity):
+    env = make(cache_dir, small_scenario("all_modes", flights=3), fidelity)
+    space = env.observation_space
+    assert space["extended"].shape == (len(EXTENDED_INDICATOR_NAMES),) and space["extended"].dtype == np.float32
+    assert space["extended_valid"].n == len(EXTENDED_INDICATOR_NAMES)
+    observations, _, _ = episode(env, seed=3)
+    for obs in observations:
+        assert space.contains(obs)
+        ext, ok = obs["extended"], obs["extended_valid"]
+        assert np.all(np.isfinite(ext)) and np.all(ext[ok == 0] == 0.0)  # invalid is 0, never NaN
+    assert np.array([o["extended_valid"] for o in observations]).any()
+
+
+def test_surrogate_without_extended_indicators_is_refused(cache_dir):
+    env = make(cache_dir, small_scenario(flights=3), "surrogate").unwrapped
+    knowledge = surrogate_knowledge(env.scenario, flight_minutes=MINUTES, size=SMALL, cache_dir=cache_dir)
+    drop = [c for n in EXTENDED_INDICATOR_NAMES for c in (n, f"{n}_valid")]
+    bare = dataclasses.replace(knowledge, healthy_table=knowledge.healthy_table.drop(columns=drop),
+                               doe_table=knowledge.doe_table.drop(columns=drop))
+    with pytest.raises(DataFormatError, match=r"must also draw the extended indicators.*lacks \['V_in1'"):
+        ActuationLoopEnv(scenario=small_scenario(flights=3), fidelity="surrogate", knowledge=bare,
+                         flight_minutes=MINUTES)

@@ -19,7 +19,7 @@ import pandas as pd
 from fuelhm_bench.errors import DataFormatError, ParameterError
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
 from fuelhm_bench.scoring.run import LABEL_COLUMNS
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+from fuelhm_bench.taxonomy import MODE_IDS
 
 __all__ = ["DECISION_FILE_COLUMNS", "export_scenario", "read_decisions", "scenario_tables",
            "score_decisions"]
@@ -128,6 +128,7 @@ def _schedule_labels(config, units) -> pd.DataFrame:
 def _surrogate_tables(sc, n_units, flight_minutes, cache_dir,
                       knowledge_size) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Scored fleet of the surrogate fidelity: the environment's observations, maintenance off."""
+    from fuelhm_bench.benchmark.harness import observation_row
     from fuelhm_bench.envs.actuation_loop import ActuationLoopEnv
 
     env = ActuationLoopEnv(scenario=sc, fidelity="surrogate", maintenance=False,
@@ -138,12 +139,7 @@ def _surrogate_tables(sc, n_units, flight_minutes, cache_dir,
     for k in range(n_units):
         obs, _ = env.reset(options={"unit": k})
         for f in range(env.n_flights):
-            valid = np.asarray(obs["valid"]).astype(bool)
-            values = np.where(valid, np.asarray(obs["indicators"], dtype=float), np.nan)
-            row = {"flight_id": k * env.n_flights + f, "unit_id": k, "flight_index": f}
-            row.update(dict(zip(INDICATOR_NAMES, values)))
-            row.update({f"{n}_valid": bool(v) for n, v in zip(INDICATOR_NAMES, valid)})
-            ind_rows.append(row)
+            ind_rows.append(observation_row(obs, k, f, k * env.n_flights + f).to_dict())
             obs, _, terminated, _, info = env.step(none)
         truth = info["episode_truth"]
         lab = {"unit_id": np.full(env.n_flights, k), "flight_index": truth["flight_index"]}

@@ -2,7 +2,7 @@
 
 The runner is the adapter between a :class:`fuelhm_bench.methods.BaseMethod`
 (or any object with ``fit``, ``start_unit`` and ``decide``) and
-``FuelHM/ActuationLoop-v1``: one episode per unit of the scenario's scored
+``FuelHM/ActuationLoop-v2``: one episode per unit of the scenario's scored
 fleet (``reset(options={"unit": k})``, maintenance off, so faults evolve as
 scheduled as in the paper's KPIs), and for every flight
 
@@ -49,24 +49,26 @@ import numpy as np
 import pandas as pd
 
 from fuelhm_bench.errors import DataFormatError, FuelHMError, ParameterError
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS
 
 __all__ = ["EnvEvaluation", "Outcome", "action_from_decision", "evaluate", "observation_row",
            "prepare_evaluation", "run_in_env", "split_training"]
 
 _VALID = tuple(f"{n}_valid" for n in INDICATOR_NAMES)
-_ROW_INDEX = pd.Index(["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *_VALID])
+_EXT_VALID = tuple(f"{n}_valid" for n in EXTENDED_INDICATOR_NAMES)
+_ROW_INDEX = pd.Index(["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *_VALID,
+                       *EXTENDED_INDICATOR_NAMES, *_EXT_VALID])
 
 
 # --------------------------------------------------------------------------- the adapter
 def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_id: Any = None) -> pd.Series:
-    """The indicator row a method sees for one observation of ``FuelHM/ActuationLoop-v1``.
+    """The indicator row a method sees for one observation of ``FuelHM/ActuationLoop-v2``.
 
     Parameters
     ----------
     observation : dict
-        ``{"indicators": (10,) float32, "valid": (10,) 0/1}`` (a ``"raw"``
-        entry, if any, is not passed on).
+        ``{"indicators": (10,) float32, "valid": (10,) 0/1, "extended": (11,) float32,
+        "extended_valid": (11,) 0/1}`` (a ``"raw"`` entry, if any, is not passed on).
     unit_id : int or str
         The unit's identifier.
     flight_index : int
@@ -78,18 +80,23 @@ def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_i
     -------
     pandas.Series
         ``flight_id``, ``unit_id``, ``flight_index``, the ten indicators
-        (float, units of ``INDICATOR_UNITS``; NaN when invalid) and
-        ``<name>_valid`` (bool), the columns of an indicator table.
+        (float, units of ``INDICATOR_UNITS``; NaN when invalid), ``<name>_valid`` (bool),
+        the extended indicators (``EXTENDED_INDICATOR_NAMES``, units of
+        ``EXTENDED_INDICATOR_UNITS``; NaN when invalid) and their ``<name>_valid``: the columns
+        of an indicator table.
     """
     values = np.asarray(observation["indicators"], dtype=np.float64)
     valid = np.asarray(observation["valid"]).astype(bool)
+    ext = np.asarray(observation["extended"], dtype=np.float64)
+    ext_valid = np.asarray(observation["extended_valid"]).astype(bool)
     data = [flight_index if flight_id is None else flight_id, unit_id, int(flight_index),
-            *np.where(valid, values, np.nan).tolist(), *valid.tolist()]
+            *np.where(valid, values, np.nan).tolist(), *valid.tolist(),
+            *np.where(ext_valid, ext, np.nan).tolist(), *ext_valid.tolist()]
     return pd.Series(data, index=_ROW_INDEX, dtype=object)
 
 
 def action_from_decision(decision) -> dict:
-    """The action of ``FuelHM/ActuationLoop-v1`` for a :class:`~fuelhm_bench.methods.Decision`.
+    """The action of ``FuelHM/ActuationLoop-v2`` for a :class:`~fuelhm_bench.methods.Decision`.
 
     Returns
     -------

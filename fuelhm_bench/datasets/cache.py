@@ -25,8 +25,8 @@ Each costs from seconds to tens of seconds of simulation. They are kept
 The key covers the kind of product, the scenario's content (every field of
 :meth:`Scenario.to_dict <fuelhm_bench.scenarios.Scenario>` except
 ``description``), the effective flight duration, the build parameters, the
-package version and the cache format: a changed scenario, size or release
-never reads a stale entry. The cache directory is, in order: the ``cache_dir``
+package version, the cache format and the indicator names (a table without a new indicator is
+never served): a changed scenario, size or release never reads a stale entry. The cache directory is, in order: the ``cache_dir``
 argument, the environment variable ``FUELHM_BENCH_CACHE``,
 ``$XDG_CACHE_HOME/fuelhm-bench``, ``~/.cache/fuelhm-bench``; ``cache_dir=False``
 keeps products in memory only.
@@ -225,13 +225,14 @@ def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **par
         Build parameters (JSON-serialisable).
     """
     from fuelhm_bench import __version__
+    from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES
 
     sc = resolve_scenario(scenario)
     content = sc.to_dict()
     content.pop("description", None)
     minutes = float(sc.mission.duration_min if flight_minutes is None else flight_minutes)
     material = {"kind": kind, "format": _FORMAT, "package": __version__, "scenario": content,
-                "flight_minutes": minutes, "params": params}
+                "flight_minutes": minutes, "params": params, "indicators": list(ALL_INDICATOR_NAMES)}
     text = json.dumps(material, sort_keys=True, default=repr, allow_nan=True)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -376,7 +377,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
                       progress: Callable[[int], object] | None = None) -> pd.DataFrame:
     """Indicator table of the scenario's scored fleet, as flown without maintenance, cached.
 
-    These are the physics observations of ``FuelHM/ActuationLoop-v1`` replaying
+    These are the physics observations of ``FuelHM/ActuationLoop-v2`` replaying
     units ``0 .. units - 1`` with ``maintenance=False``
     (:meth:`ActuationLoopEnv.load_replays <fuelhm_bench.envs.ActuationLoopEnv.load_replays>`):
     simulated once, then shared by every method evaluated.

@@ -1,4 +1,4 @@
-"""``FuelHM/ActuationLoop-v1``: the health monitoring of one actuation loop, flight by flight."""
+"""``FuelHM/ActuationLoop-v2``: the health monitoring of one actuation loop, flight by flight."""
 
 from __future__ import annotations
 
@@ -18,9 +18,9 @@ from fuelhm_bench.envs.surrogate import SurrogateModel
 from fuelhm_bench.errors import DataFormatError, ParameterError
 from fuelhm_bench.flights.fleet import build_units, mission_rng, noise_rng, rng_for, unit_rng
 from fuelhm_bench.flights.schedule import draw_unit_schedule
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS
 
-__all__ = ["ActuationLoopEnv", "FIDELITIES", "INDICATOR_BOUNDS", "RAW_BOUNDS"]
+__all__ = ["ActuationLoopEnv", "EXTENDED_INDICATOR_BOUNDS", "FIDELITIES", "INDICATOR_BOUNDS", "RAW_BOUNDS"]
 
 #: Simulation fidelities of the environment.
 FIDELITIES: tuple[str, ...] = ("physics", "surrogate")
@@ -34,6 +34,16 @@ INDICATOR_BOUNDS: dict[str, tuple[float, float]] = {
     "G_in": (-1000.0, 1000.0), "G_out": (-1000.0, 1000.0), "G_null": (-1000.0, 1000.0),
 }
 
+#: Bounds of the ``"extended"`` observation, per extended indicator, in ``EXTENDED_INDICATOR_UNITS``
+#: (velocities in mm/s, ``Idle_frac`` a fraction, ``Hys_lo``/``Hys_hi`` in mA, ``I0_slope`` in
+#: mA per % N2: at most 24 mA over the 5 % minimum band separation). Values outside are clipped.
+EXTENDED_INDICATOR_BOUNDS: dict[str, tuple[float, float]] = {
+    "V_in1": (-1000.0, 1000.0), "V_out1": (-1000.0, 1000.0), "V_in3": (-1000.0, 1000.0),
+    "V_out3": (-1000.0, 1000.0), "V_in7": (-1000.0, 1000.0), "V_out7": (-1000.0, 1000.0),
+    "Vsd_null": (0.0, 1000.0), "Idle_frac": (0.0, 1.0), "Hys_lo": (0.0, 12.0), "Hys_hi": (0.0, 12.0),
+    "I0_slope": (-5.0, 5.0),
+}
+
 #: Bounds of the ``"raw"`` observation rows: control current [mA] and LVDT position [mm].
 RAW_BOUNDS: dict[str, tuple[float, float]] = {"current_mA": (-50.0, 50.0), "position_mm": (-20.0, 80.0)}
 
@@ -43,9 +53,32 @@ _ALL = (1 << _N_MODES) - 1
 _BITS = np.array([1 << j for j in range(_N_MODES)], dtype=np.int64)
 _LOW = np.array([INDICATOR_BOUNDS[n][0] for n in INDICATOR_NAMES], dtype=np.float32)
 _HIGH = np.array([INDICATOR_BOUNDS[n][1] for n in INDICATOR_NAMES], dtype=np.float32)
+_XLOW = np.array([EXTENDED_INDICATOR_BOUNDS[n][0] for n in EXTENDED_INDICATOR_NAMES], dtype=np.float32)
+_XHIGH = np.array([EXTENDED_INDICATOR_BOUNDS[n][1] for n in EXTENDED_INDICATOR_NAMES], dtype=np.float32)
+_N_EXT = len(EXTENDED_INDICATOR_NAMES)
 _ARGUMENTS = ("scenario", "fidelity", "maintenance", "drifted", "flight_minutes", "raw", "raw_samples",
               "knowledge", "knowledge_size", "cache_dir", "render_mode")
 _OPTIONS = ("unit", "evaluation")
+
+
+def _observation_arrays(rows) -> dict[str, np.ndarray]:
+    """Observation arrays of indicator rows (a table or a dict of columns): values 0 where invalid, clipped.
+
+    Returns
+    -------
+    dict
+        ``"indicators"`` (n, 10) and ``"extended"`` (n, 11) float32, ``"valid"`` and
+        ``"extended_valid"`` int8.
+    """
+    out = {}
+    for key, flag, names, low, high in (("indicators", "valid", INDICATOR_NAMES, _LOW, _HIGH),
+                                        ("extended", "extended_valid", EXTENDED_INDICATOR_NAMES, _XLOW, _XHIGH)):
+        valid = np.column_stack([np.asarray(rows[f"{n}_valid"], dtype=bool) for n in names])
+        values = np.column_stack([np.asarray(rows[n], dtype=np.float64) for n in names])
+        valid &= np.isfinite(values)
+        out[key] = np.clip(np.where(valid, values, 0.0), low, high).astype(np.float32)
+        out[flag] = valid.astype(np.int8)
+    return out
 
 
 def _bitmask(flags: np.ndarray) -> list[int]:
@@ -98,7 +131,8 @@ class ActuationLoopEnv(gym.Env):
 
     ## Observation Space
 
-    ``Dict({"indicators": Box(low, high, (10,), float32), "valid": MultiBinary(10)})``,
+    ``Dict({"indicators": Box(low, high, (10,), float32), "valid": MultiBinary(10),
+    "extended": Box(low, high, (11,), float32), "extended_valid": MultiBinary(11)})``,
     plus ``"raw": Box((2, raw_samples), float32)`` when ``raw=True``.
 
     | index | indicator | unit    | low   | high | meaning (paper Table I)                          |
@@ -114,10 +148,25 @@ class ActuationLoopEnv(gym.Env):
     | 8     | G_out     | mm/s/mA | -1000 | 1000 | gain of the outlet segment                       |
     | 9     | G_null    | mm/s/mA | -1000 | 1000 | gain of the null segment                         |
 
-    ``valid[i]`` is 1 when indicator ``i`` was extracted, 0 when the flight's
-    data did not support it; an invalid indicator is reported as 0 in
-    ``"indicators"`` (never NaN). Values are clipped to the bounds (shipped
-    scenarios stay well inside). ``"raw"`` (physics only) is the recorded
+    ``"extended"`` holds the model-free indicators beyond the paper
+    (:data:`~fuelhm_bench.taxonomy.EXTENDED_INDICATOR_NAMES`, docs/indicators.md), extracted from
+    the same flight by the same on-board extractor, with their flags in ``"extended_valid"``:
+
+    | index | indicator | unit | low   | high | meaning                                              |
+    |-------|-----------|------|-------|------|------------------------------------------------------|
+    | 0-5   | V_in1, V_out1, V_in3, V_out3, V_in7, V_out7 | mm/s | -1000 | 1000 | mean moving velocity at I0 -/+ 1, 3, 7 mA |
+    | 6     | Vsd_null  | mm/s | 0     | 1000 | velocity scatter within I0 +- 1 mA                   |
+    | 7     | Idle_frac | 1    | 0     | 1    | share of the used samples at rest                    |
+    | 8     | Hys_lo    | mA   | 0     | 12   | Hys0 of the rests at low supply pressure (N2 < 70 %) |
+    | 9     | Hys_hi    | mA   | 0     | 12   | Hys0 of the rests at high supply pressure (N2 >= 80 %) |
+    | 10    | I0_slope  | mA/% | -5    | 5    | change of the idle current per % of N2 between the two bands |
+
+    ``valid[i]`` (``extended_valid[i]``) is 1 when indicator ``i`` was extracted, 0 when the
+    flight's data did not support it; an invalid indicator is reported as 0 in
+    ``"indicators"`` (``"extended"``), never NaN. Values are clipped to the bounds (shipped
+    scenarios stay well inside). With ``fidelity="surrogate"`` the extended indicators are
+    drawn by the surrogate like the ten (it must have learnt them: a surrogate without them is
+    refused with :class:`~fuelhm_bench.errors.DataFormatError`). ``"raw"`` (physics only) is the recorded
     flight resampled by linear interpolation to ``raw_samples`` equally spaced
     instants from the first to the last sample: row 0 the control current [mA]
     in [-50, 50], row 1 the LVDT position [mm] in [-20, 80]. The ground truth
@@ -191,7 +240,7 @@ class ActuationLoopEnv(gym.Env):
     ```python
     import gymnasium as gym
     import fuelhm_bench.envs
-    env = gym.make("FuelHM/ActuationLoop-v1", scenario="all_modes", fidelity="surrogate")
+    env = gym.make("FuelHM/ActuationLoop-v2", scenario="all_modes", fidelity="surrogate")
     ```
 
     | argument        | default        | meaning                                                                     |
@@ -214,6 +263,11 @@ class ActuationLoopEnv(gym.Env):
 
     ## Version History
 
+    * v2: the observation gains ``"extended"`` and ``"extended_valid"``: the eleven extended
+      indicators (velocities at fixed currents, null scatter, rest fraction, and the issue-11
+      supply-pressure indicators ``Hys_lo``, ``Hys_hi``, ``I0_slope``, which need N2 per sample).
+      The paper's ten and the rewards are unchanged. Retired v1: ``gym.make("FuelHM/ActuationLoop-v1")``
+      raises ``DeprecatedEnv`` naming v2.
     * v1: physics v2 (issue 11): no per-frame N2 dither in the operating excitation, the seven
       degradation laws act on the physical element that degrades, every shipped scenario at
       version 2 (all_modes with >= 15 faulty units per mode). Observations and rewards differ
@@ -309,9 +363,18 @@ class ActuationLoopEnv(gym.Env):
                                       f"for the modes {list(MODE_IDS)}. Got indicators {list(self.surrogate.names)}"
                                       f" and modes {list(self.surrogate.modes)} instead.")
             self._columns = np.array([self.surrogate.names.index(n) for n in INDICATOR_NAMES])
+            lacking = [n for n in EXTENDED_INDICATOR_NAMES if n not in self.surrogate.names]
+            if lacking:
+                raise DataFormatError(f"The surrogate of {owner} must also draw the extended indicators "
+                                      f"{list(EXTENDED_INDICATOR_NAMES)} (the observation's 'extended'); it lacks "
+                                      f"{lacking}. Build its knowledge from indicator tables with those columns "
+                                      f"(fuelhm_bench.datasets.cache.surrogate_knowledge does).")
+            self._ext_columns = np.array([self.surrogate.names.index(n) for n in EXTENDED_INDICATOR_NAMES])
 
         obs = {"indicators": spaces.Box(_LOW, _HIGH, (len(INDICATOR_NAMES),), np.float32),
-               "valid": spaces.MultiBinary(len(INDICATOR_NAMES))}
+               "valid": spaces.MultiBinary(len(INDICATOR_NAMES)),
+               "extended": spaces.Box(_XLOW, _XHIGH, (_N_EXT,), np.float32),
+               "extended_valid": spaces.MultiBinary(_N_EXT)}
         if self.raw:
             low = np.repeat(np.array([[RAW_BOUNDS["current_mA"][0]], [RAW_BOUNDS["position_mm"][0]]],
                                      dtype=np.float32), self.raw_samples, axis=1)
@@ -322,7 +385,7 @@ class ActuationLoopEnv(gym.Env):
         self.action_space = spaces.Dict({"alarm": spaces.Discrete(2),
                                          "guilt": spaces.Box(0.0, 1.0, (_N_MODES,), np.float32)})
         self._t = -1  # no episode yet
-        self._replays: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._replays: dict[int, dict[str, np.ndarray]] = {}
 
     def load_replays(self, table) -> None:
         """Serve replayed units from precomputed physics indicators instead of simulating them again.
@@ -337,18 +400,23 @@ class ActuationLoopEnv(gym.Env):
         table : pandas.DataFrame
             Indicator table of the scored fleet as :func:`fuelhm_bench.datasets.fleet_indicators`
             returns it for ``test_fleet_config()`` (``unit_id``, ``flight_index``, the
-            indicators, ``<name>_valid``), every flight of each unit it holds.
+            ten and the extended indicators, ``<name>_valid``), every flight of each unit it holds.
 
         Raises
         ------
         ParameterError
-            Not the physics fidelity, maintenance on, raw observations on, or a
-            unit's flights incomplete.
+            Not the physics fidelity, maintenance on, raw observations on, a missing
+            indicator column, or a unit's flights incomplete.
         """
         if self.fidelity != "physics" or self.maintenance or self.raw:
             raise ParameterError(f"{type(self).__name__}.load_replays needs fidelity='physics', maintenance=False "
                                  f"and raw=False (replayed flights must not depend on the actions). Got "
                                  f"fidelity={self.fidelity!r}, maintenance={self.maintenance}, raw={self.raw}.")
+        needed = [c for n in (*INDICATOR_NAMES, *EXTENDED_INDICATOR_NAMES) for c in (n, f"{n}_valid")]
+        missing = [c for c in needed if c not in table.columns]
+        if missing:
+            raise ParameterError(f"The 'table' parameter of {type(self).__name__}.load_replays must hold the "
+                                 f"columns of every observed indicator and its flag. Got no {missing} instead.")
         replays = {}
         for unit, rows in table.groupby("unit_id", sort=True):
             rows = rows.sort_values("flight_index")
@@ -356,9 +424,7 @@ class ActuationLoopEnv(gym.Env):
                 raise ParameterError(f"The 'table' parameter of {type(self).__name__}.load_replays must hold "
                                      f"flights 0..{self.n_flights - 1} of each unit. Got "
                                      f"{rows['flight_index'].tolist()} for unit {unit!r} instead.")
-            valid = rows[[f"{n}_valid" for n in INDICATOR_NAMES]].to_numpy(dtype=bool)
-            values = np.where(valid, rows[list(INDICATOR_NAMES)].to_numpy(dtype=np.float64), 0.0)
-            replays[int(unit)] = (np.clip(values, _LOW, _HIGH).astype(np.float32), valid.astype(np.int8))
+            replays[int(unit)] = _observation_arrays(rows)
         self._replays = replays
 
     # ------------------------------------------------------------------ episode set-up
@@ -447,10 +513,10 @@ class ActuationLoopEnv(gym.Env):
         """Fly flight ``t`` (physics) or read it (surrogate); log the unit's state during it."""
         self._active_log.append(self._active)
         if self.surrogate is not None:
-            return {"indicators": self._table[t].copy(), "valid": self._valid_table[t].copy()}
+            return self._surrogate_observation(t)
         replay = self._replays.get(self._unit_id) if self._unit_id >= 0 else None
         if replay is not None:
-            self._last = {"indicators": replay[0][t], "valid": replay[1][t]}
+            self._last = {k: v[t] for k, v in replay.items()}
         else:
             self._last = self._fly(t)
         return {k: v.copy() for k, v in self._last.items()}
@@ -472,13 +538,13 @@ class ActuationLoopEnv(gym.Env):
         current_ma = out.current_a * 1e3
         position_mm = out.measured_position_m * 1e3
         try:
-            result = extract_indicators(out.time_s, current_ma, position_mm, flight_id=t)
+            result = extract_indicators(out.time_s, current_ma, position_mm, flight_id=t,
+                                        n2_pct=100.0 * inputs.n2_frac)
         except DataFormatError as exc:
             result = IndicatorResult.invalid((str(exc),))
-        values = np.array([result.values[n] for n in INDICATOR_NAMES], dtype=np.float64)
-        valid = np.array([result.valid[n] for n in INDICATOR_NAMES], dtype=np.int8)
-        values = np.clip(np.where(valid == 1, values, 0.0), _LOW, _HIGH).astype(np.float32)
-        obs = {"indicators": values, "valid": valid}
+        row = {**result.values, **{f"{n}_valid": v for n, v in result.valid.items()},
+               **result.extended_values, **{f"{n}_valid": v for n, v in result.extended_valid.items()}}
+        obs = {k: v[0] for k, v in _observation_arrays({k: [v] for k, v in row.items()}).items()}
         if self.raw:
             grid = np.linspace(out.time_s[0], out.time_s[-1], self.raw_samples)
             raw = np.stack([np.interp(grid, out.time_s, current_ma), np.interp(grid, out.time_s, position_mm)])
@@ -493,12 +559,20 @@ class ActuationLoopEnv(gym.Env):
             parts = {"healthy": parts["healthy"][start:], "valid": parts["valid"][start:],
                      "doe_units": parts["doe_units"], "uniforms": parts["uniforms"][start:]}
         values, valid = self.surrogate.degrade(parts, intensity)
-        values = np.clip(values[:, self._columns], _LOW, _HIGH).astype(np.float32)
-        valid = valid[:, self._columns].astype(np.int8)
+        tables = {}
+        for key, columns, low, high in (("indicators", self._columns, _LOW, _HIGH),
+                                        ("extended", self._ext_columns, _XLOW, _XHIGH)):
+            ok = valid[:, columns] & np.isfinite(values[:, columns])
+            tables[key] = np.clip(np.where(ok, values[:, columns], 0.0), low, high).astype(np.float32)
+            tables["valid" if key == "indicators" else "extended_valid"] = ok.astype(np.int8)
         if start:
-            self._table[start:], self._valid_table[start:] = values, valid
+            for key, table in tables.items():
+                self._tables[key][start:] = table
         else:
-            self._table, self._valid_table = values, valid
+            self._tables = tables
+
+    def _surrogate_observation(self, t: int) -> dict:
+        return {key: table[t].copy() for key, table in self._tables.items()}
 
     def _mask(self, bits: int) -> np.ndarray:
         return ((bits & _BITS) != 0).astype(np.float64)
@@ -598,7 +672,7 @@ class ActuationLoopEnv(gym.Env):
         if t == self.n_flights:
             self._t = -1
             if self.surrogate is not None:
-                obs = {"indicators": self._table[t - 1].copy(), "valid": self._valid_table[t - 1].copy()}
+                obs = self._surrogate_observation(t - 1)
             else:
                 obs = {k: v.copy() for k, v in self._last.items()}
             info = {"flight_index": t - 1, "episode_truth": self._episode_truth()}

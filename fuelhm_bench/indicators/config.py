@@ -250,9 +250,11 @@ class ExtractionConfig:
                 self.bin_width_ma,
             )
         if self.streaming_state_nbytes > STREAMING_STATE_BUDGET_BYTES:
-            per_bin = 8 * N_ACCUMULATORS + 8 * N_BAND_ACCUMULATORS / BAND_CELL_BINS
-            max_bins = int((STREAMING_STATE_BUDGET_BYTES - self._fixed_state_nbytes
-                            - 8 * N_BAND_ACCUMULATORS) // per_bin)
+            room = STREAMING_STATE_BUDGET_BYTES - self._fixed_state_nbytes
+            max_bins = room // (8 * N_ACCUMULATORS)
+            while max_bins > 0 and 8 * (N_ACCUMULATORS * max_bins + N_BAND_ACCUMULATORS * -(
+                    -max_bins // BAND_CELL_BINS)) > room:
+                max_bins -= 1
             raise _param_error(
                 "bin_width_ma",
                 f"large enough for at most {max_bins} bins over {self.current_range_ma!r} mA "
