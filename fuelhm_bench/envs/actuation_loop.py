@@ -154,7 +154,12 @@ class ActuationLoopEnv(gym.Env):
 
     | index | indicator | unit | low   | high | meaning                                              |
     |-------|-----------|------|-------|------|------------------------------------------------------|
-    | 0-5   | V_in1, V_out1, V_in3, V_out3, V_in7, V_out7 | mm/s | -1000 | 1000 | mean moving velocity at I0 -/+ 1, 3, 7 mA |
+    | 0     | V_in1     | mm/s | -1000 | 1000 | mean velocity of the moving samples at I0 - 1 mA     |
+    | 1     | V_out1    | mm/s | -1000 | 1000 | the same at I0 + 1 mA                                |
+    | 2     | V_in3     | mm/s | -1000 | 1000 | the same at I0 - 3 mA                                |
+    | 3     | V_out3    | mm/s | -1000 | 1000 | the same at I0 + 3 mA                                |
+    | 4     | V_in7     | mm/s | -1000 | 1000 | the same at I0 - 7 mA                                |
+    | 5     | V_out7    | mm/s | -1000 | 1000 | the same at I0 + 7 mA                                |
     | 6     | Vsd_null  | mm/s | 0     | 1000 | velocity scatter within I0 +- 1 mA                   |
     | 7     | Idle_frac | 1    | 0     | 1    | share of the used samples at rest                    |
     | 8     | Hys_lo    | mA   | 0     | 12   | Hys0 of the rests at low supply pressure (N2 < 70 %) |
