@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from fuelhm_bench.methods import BaseMethod, Decision
-from fuelhm_bench.taxonomy import INDICATOR_NAMES
+from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES
 
 
 class IdleCurrent(BaseMethod):
@@ -117,7 +117,8 @@ class Peeks(IdleCurrent):
     """Fails unless every row holds exactly the observation columns."""
 
     def _decide(self, row):
-        allowed = {"flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *(f"{n}_valid" for n in INDICATOR_NAMES)}
+        names = (*INDICATOR_NAMES, *EXTENDED_INDICATOR_NAMES)
+        allowed = {"flight_id", "unit_id", "flight_index", *names, *(f"{n}_valid" for n in names)}
         if set(row.index) != allowed:
             raise AssertionError(f"unexpected columns {set(row.index) ^ allowed}")
         return super()._decide(row)

@@ -11,7 +11,7 @@ import pytest
 from fuelhm_bench.cli import main
 from fuelhm_bench.datasets.doe import DesignOfExperiments, run_doe
 from fuelhm_bench.flights.mission import MissionProfile
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS
 
 SHORT = MissionProfile(duration_s=300.0)
 
@@ -103,8 +103,9 @@ def test_itl_command_writes_laws_and_signatures(tmp_path):
     assert np.isfinite(sig.loc["null_bias_drift"].to_numpy()).all()
     # The diagnosability report, for the paper's ten and the extended set, next to the laws.
     text = (out / "diagnosability.md").read_text()
-    assert "paper indicator set (10 indicators)" in text and "extended indicator set (18 indicators)" in text
-    for name, n_ind in (("paper", 10), ("extended", 18)):
+    n_all = len(ALL_INDICATOR_NAMES)  # the ten + the extended set (21 with Hys_lo, Hys_hi, I0_slope)
+    assert "paper indicator set (10 indicators)" in text and f"extended indicator set ({n_all} indicators)" in text
+    for name, n_ind in (("paper", 10), ("extended", n_all)):
         laws = pd.read_csv(out / f"diagnosability_{name}_laws.csv")
         assert len(laws) == 7 * n_ind and {"r2_linear", "r2_power", "z_power"} <= set(laws.columns)
         modes = json.loads((out / f"diagnosability_{name}.json").read_text())["modes"]

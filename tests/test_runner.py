@@ -19,7 +19,7 @@ from fuelhm_bench.benchmark.harness import (Outcome, action_from_decision, evalu
                                            run_in_env)
 from fuelhm_bench.scenarios import load_scenario
 from fuelhm_bench.scoring import LABEL_COLUMNS
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS
 from sizes import DOE_UNITS, knowledge_size
 from sizes import tiny_scenario as tiny
 from submissions import Exits, Hangs, IdleCurrent, NaNScore, NotADecision, Peeks, Raises
@@ -41,12 +41,20 @@ def surrogate_eval(cache_dir):
 
 # --------------------------------------------------------------------------- the adapter
 def test_observation_row_and_action():
-    obs = {"indicators": np.arange(10, dtype=np.float32), "valid": np.array([1] * 9 + [0], dtype=np.int8)}
+    n_ext = len(EXTENDED_INDICATOR_NAMES)
+    obs = {"indicators": np.arange(10, dtype=np.float32), "valid": np.array([1] * 9 + [0], dtype=np.int8),
+           "extended": np.arange(n_ext, dtype=np.float32) + 100, "extended_valid": np.r_[[1] * (n_ext - 1), 0]}
     row = observation_row(obs, unit_id=4, flight_index=2, flight_id=42)
     assert list(row.index) == ["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES,
-                               *(f"{n}_valid" for n in INDICATOR_NAMES)]
+                               *(f"{n}_valid" for n in INDICATOR_NAMES), *EXTENDED_INDICATOR_NAMES,
+                               *(f"{n}_valid" for n in EXTENDED_INDICATOR_NAMES)]
     assert row["flight_id"] == 42 and row["unit_id"] == 4 and row["flight_index"] == 2
     assert row["X1"] == 0.0 and row["G_out"] == 8.0 and np.isnan(row["G_null"]) and row["G_null_valid"] is False
+    first, last = EXTENDED_INDICATOR_NAMES[0], EXTENDED_INDICATOR_NAMES[-1]
+    assert row[first] == 100.0 and row[f"{first}_valid"] is True
+    assert np.isnan(row[last]) and row[f"{last}_valid"] is False
+    bare = observation_row({k: obs[k] for k in ("indicators", "valid")}, unit_id=4, flight_index=2)
+    assert not any(bare[f"{n}_valid"] for n in EXTENDED_INDICATOR_NAMES) and np.isnan(bare[first])
     action = action_from_decision(Decision(score=1.0, alarm=True, guilt=[0, 1.0000004, 0, 0, 0, 0, 0]))
     assert action["alarm"] == 1 and action["guilt"].dtype == np.float32 and action["guilt"].max() == 1.0
 
@@ -62,7 +70,8 @@ def test_physics_runner_reproduces_the_table_pipeline(cache_dir):
     evaluation = prepare_evaluation(sc, fidelity="physics", knowledge_size=SIZE, cache_dir=cache_dir)
     columns = list(evaluation.fit_indicators.columns)  # the observation's columns (no n_points, quality_reason)
     assert columns == ["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES,
-                       *(f"{n}_valid" for n in INDICATOR_NAMES)]
+                       *(f"{n}_valid" for n in INDICATOR_NAMES), *EXTENDED_INDICATOR_NAMES,
+                       *(f"{n}_valid" for n in EXTENDED_INDICATOR_NAMES)]
     assert set(evaluation.fit_indicators["unit_id"]).isdisjoint(evaluation.calibration_indicators["unit_id"])
     method = PaperMahalanobis().fit(evaluation.fit_indicators, knowledge=evaluation.method_knowledge, random_state=0)
     healthy = run_table(method, evaluation.calibration_indicators)["score"].to_numpy()

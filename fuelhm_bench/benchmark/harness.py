@@ -68,7 +68,8 @@ def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_i
     ----------
     observation : dict
         ``{"indicators": (10,) float32, "valid": (10,) 0/1, "extended": (11,) float32,
-        "extended_valid": (11,) 0/1}`` (a ``"raw"`` entry, if any, is not passed on).
+        "extended_valid": (11,) 0/1}`` (a ``"raw"`` entry, if any, is not passed on;
+        without ``"extended"`` every extended indicator is reported invalid).
     unit_id : int or str
         The unit's identifier.
     flight_index : int
@@ -87,8 +88,12 @@ def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_i
     """
     values = np.asarray(observation["indicators"], dtype=np.float64)
     valid = np.asarray(observation["valid"]).astype(bool)
-    ext = np.asarray(observation["extended"], dtype=np.float64)
-    ext_valid = np.asarray(observation["extended_valid"]).astype(bool)
+    if "extended" in observation:
+        ext = np.asarray(observation["extended"], dtype=np.float64)
+        ext_valid = np.asarray(observation["extended_valid"]).astype(bool)
+    else:  # an observation without the extended indicators: all of them invalid (NaN, False)
+        ext = np.full(len(EXTENDED_INDICATOR_NAMES), np.nan)
+        ext_valid = np.zeros(len(EXTENDED_INDICATOR_NAMES), dtype=bool)
     data = [flight_index if flight_id is None else flight_id, unit_id, int(flight_index),
             *np.where(valid, values, np.nan).tolist(), *valid.tolist(),
             *np.where(ext_valid, ext, np.nan).tolist(), *ext_valid.tolist()]

@@ -3,8 +3,9 @@
 The paper's ten indicators confuse some modes (their signatures are nearly collinear, or a mode
 moves none of them much). These indicators read the same binned curve
 (:class:`~fuelhm_bench.indicators.curve.VelocityGainCurve`) at fixed places, without a fitted
-model, so the batch and the streaming extractors produce them bit for bit alike and the
-streaming state does not grow (they need no accumulator of their own).
+model, so the batch and the streaming extractors produce them bit for bit alike. Eight read the
+per-bin sums of the paper's extractor; the three supply-pressure indicators read the curve's band
+accumulators (``8 x ceil(n_bins / 10)`` float64, filled only when N2 is recorded).
 
 Definitions (currents in mA relative to the idle current ``I0``, velocities in mm/s)
 -----------------------------------------------------------------------------------
