@@ -289,6 +289,13 @@ def idle_statistics(curve: VelocityGainCurve, config: ExtractionConfig | None = 
 def idle_window(curve: VelocityGainCurve, config: ExtractionConfig | None = None) -> slice | None:
     """The bins of the idle window, ``k_med - H .. k_med + H`` (see :func:`idle_statistics`).
 
+    Parameters
+    ----------
+    curve : VelocityGainCurve
+        Binned curve with its idle accumulators.
+    config : ExtractionConfig, optional
+        Supplies ``idle_halfwidth_ma``; defaults to the curve's configuration.
+
     Returns
     -------
     slice or None

@@ -160,7 +160,18 @@ def sample_kernel_args(config: ExtractionConfig, zones: tuple[float, float, floa
 
 
 def band_cell_width_ma(config: ExtractionConfig) -> float:
-    """Width of a cell of the band accumulators, ``BAND_CELL_BINS * bin_width_ma``, in mA."""
+    """Width of a cell of the band accumulators, ``BAND_CELL_BINS * bin_width_ma``, in mA.
+
+    Parameters
+    ----------
+    config : ExtractionConfig
+        Supplies ``bin_width_ma``.
+
+    Returns
+    -------
+    float
+        The cell width, in mA (the same product in both batch engines, so their sums agree).
+    """
     return BAND_CELL_BINS * float(config.bin_width_ma)
 
 
