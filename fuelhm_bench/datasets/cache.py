@@ -283,7 +283,7 @@ def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callabl
 
 def published_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                         cache_dir: str | os.PathLike | bool | None = None,
-                        progress: Callable[[int], object] | None = None):
+                        progress: Callable[[int], object] | None = None, workers: int = 1):
     """The published knowledge of a scenario (as :func:`fuelhm_bench.datasets.knowledge.build_knowledge` builds it), cached.
 
     Parameters
@@ -298,6 +298,9 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
         Disk cache directory; None: :func:`default_cache_dir`; False: memory only.
     progress : callable, optional
         Called with numbers of flights simulated (only when building).
+    workers : int, default=1
+        Processes simulating in parallel (only when building); the product is
+        byte-identical for any number (:mod:`fuelhm_bench.datasets.parallel`).
 
     Returns
     -------
@@ -315,7 +318,7 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     build = knowledge_build(sc, flight_minutes=flight_minutes, size=size)
 
     def make() -> dict[str, pd.DataFrame]:
-        result = build_knowledge(build, progress=progress)
+        result = build_knowledge(build, progress=progress, workers=workers)
         return {"healthy": result.healthy_table, "doe": result.doe_table}
 
     def finish(tables: dict[str, pd.DataFrame]):
@@ -328,7 +331,7 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
 def training_indicators(scenario, *, flight_minutes: float | None = None, units: int | None = None,
                         flights: int | None = None, drifted: bool = False,
                         cache_dir: str | os.PathLike | bool | None = None,
-                        progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+                        progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Indicator table of the scenario's healthy training fleet (what methods are fitted on), cached.
 
     Parameters
@@ -344,6 +347,8 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
         model (the scored fleet's healthy state); training data never has it.
     cache_dir : str, path-like, False or None, default=None
     progress : callable, optional
+    workers : int, default=1
+        Processes simulating in parallel (only when building; same bytes for any number).
 
     Returns
     -------
@@ -364,7 +369,7 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
     key = cache_key("training", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
-        return {"table": fleet_indicators(config, progress=progress)[0]}
+        return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
 
     table = _cached(key, _entry(cache_dir, "training", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "training", "flight_minutes": flight_minutes, **params})
@@ -373,7 +378,7 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
 
 def scored_indicators(scenario, *, flight_minutes: float | None = None, units: int | None = None,
                       drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
-                      progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+                      progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Indicator table of the scenario's scored fleet, as flown without maintenance, cached.
 
     These are the physics observations of ``FuelHM/ActuationLoop-v1`` replaying
@@ -391,6 +396,8 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
         Whether the fleet carries the scenario's nominal-parameter drift.
     cache_dir : str, path-like, False or None, default=None
     progress : callable, optional
+    workers : int, default=1
+        Processes simulating in parallel (only when building; same bytes for any number).
 
     Returns
     -------
@@ -409,7 +416,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
     key = cache_key("scored", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
-        return {"table": fleet_indicators(config, progress=progress)[0]}
+        return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
 
     table = _cached(key, _entry(cache_dir, "scored", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "scored", "flight_minutes": flight_minutes, **params})
@@ -418,7 +425,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
 
 def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                   drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
-                  progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+                  progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Design of experiments on the scored fleet's model (what the surrogate's responses are learnt on), cached.
 
     Unlike the published DOE (:func:`published_knowledge`, on the published
@@ -448,7 +455,7 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     key = cache_key("surrogate-doe", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
-        return {"table": run_doe(doe, progress=progress)}
+        return {"table": run_doe(doe, progress=progress, workers=workers)}
 
     table = _cached(key, _entry(cache_dir, "surrogate-doe", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "surrogate-doe", "flight_minutes": flight_minutes, **params})
@@ -457,7 +464,7 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
 
 def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                       drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
-                      progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+                      progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Healthy flights of new units of the scored fleet's model (what the surrogate's healthy law is learnt on), cached.
 
     ``size.surrogate_units x size.surrogate_flights`` healthy flights of units
@@ -487,7 +494,7 @@ def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: Kn
     key = cache_key("surrogate-healthy", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
-        return {"table": fleet_indicators(config, progress=progress)[0]}
+        return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
 
     table = _cached(key, _entry(cache_dir, "surrogate-healthy", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "surrogate-healthy", "flight_minutes": flight_minutes, **params})
@@ -496,7 +503,7 @@ def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: Kn
 
 def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                         drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
-                        progress: Callable[[int], object] | None = None):
+                        progress: Callable[[int], object] | None = None, workers: int = 1):
     """What the surrogate fidelity is learnt from: physics flights of new units of the scored fleet's model.
 
     ``healthy_table``: :func:`surrogate_healthy` (units independent of the
@@ -514,7 +521,7 @@ def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     from fuelhm_bench.datasets.knowledge import KnowledgeResult
 
     size = KnowledgeSize() if size is None else size
-    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
+    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress, "workers": workers}
     published = published_knowledge(scenario, size=size, **common)
     table = surrogate_healthy(scenario, size=size, drifted=drifted, **common)
     doe = surrogate_doe(scenario, size=size, drifted=drifted, **common)

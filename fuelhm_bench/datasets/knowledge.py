@@ -115,12 +115,17 @@ class KnowledgeResult:
 
 
 def build_knowledge(build: KnowledgeBuild = KnowledgeBuild(), *, extraction=None,
-                    progress: Callable[[int], object] | None = None) -> KnowledgeResult:
-    """Simulate the healthy fleet and the design of experiments; fit the healthy model, ITL and signatures."""
+                    progress: Callable[[int], object] | None = None, workers: int = 1) -> KnowledgeResult:
+    """Simulate the healthy fleet and the design of experiments; fit the healthy model, ITL and signatures.
+
+    ``workers`` processes simulate in parallel (:mod:`fuelhm_bench.datasets.parallel`); the
+    result is byte-identical for any number.
+    """
     from fuelhm_bench.datasets.fleets import fleet_indicators
 
-    healthy_table, _ = fleet_indicators(build.healthy_fleet, extraction=extraction, progress=progress)
-    doe_table = run_doe(build.doe, extraction=extraction, progress=progress)
+    healthy_table, _ = fleet_indicators(build.healthy_fleet, extraction=extraction, progress=progress,
+                                        workers=workers)
+    doe_table = run_doe(build.doe, extraction=extraction, progress=progress, workers=workers)
     healthy_model = HealthyModel().fit(healthy_table)
     itl = fit_itl(doe_table)
     sig = signature_matrix(itl, healthy_model, max_intensity=build.max_intensity)
