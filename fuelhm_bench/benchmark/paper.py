@@ -60,7 +60,9 @@ def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3
     physics fidelity, cached); the paper's method
     (``fuelhm_baselines.paper_mahalanobis:PaperMahalanobis``, ``a=2``) runs sealed
     (:func:`~fuelhm_bench.benchmark.harness.run_in_env`) with the signatures of the
-    two modes of the study. ``scale`` < 1 shrinks the scored fleet (quick checks).
+    two modes of the study. The design of experiments flies those two modes only
+    (the laws of a mode do not depend on the other modes of the design).
+    ``scale`` < 1 shrinks the scored fleet (quick checks).
     ``workers`` processes simulate what is not cached (None: every CPU this
     process may use); the results are byte-identical for any number.
     """
@@ -77,7 +79,7 @@ def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3
     t0 = time.perf_counter()
     stage("data: published knowledge (design of experiments, ITL, signatures), training and scored flights")
     evaluation = prepare_evaluation(sc, fidelity="physics", scale=scale, robustness=False,
-                                    knowledge_size=KnowledgeSize(doe_units=doe_units), cache_dir=cache_dir,
+                                    knowledge_size=KnowledgeSize(doe_units=doe_units, doe_modes=PAPER_MODES), cache_dir=cache_dir,
                                     progress=progress, workers=check_workers(workers, "run_paper"))
     knowledge = evaluation.knowledge
     timings["data_s"] = time.perf_counter() - t0

@@ -50,6 +50,7 @@ import pandas as pd
 
 from fuelhm_bench._numba_cache import CACHE_ENV_VAR  # the variable overriding the cache directory
 from fuelhm_bench.errors import ParameterError, parameter_error
+from fuelhm_bench.taxonomy import MODE_IDS
 
 __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
            "knowledge_build", "published_knowledge", "resolve_scenario", "scored_indicators",
@@ -91,6 +92,11 @@ class KnowledgeSize:
         are learnt on (the scored fleet's model), >= 1.
     surrogate_doe_intensities : tuple of float, default=(0.1, 0.25, 0.5, 0.75, 1.0)
         Its intensities, each in (0, 1].
+    doe_modes : tuple of str, default=MODE_IDS
+        Modes of the published design of experiments (the ITL and signatures
+        have these modes only). A study of some modes (the paper's two) need
+        not fly the others: the laws of a mode do not depend on which other
+        modes are in the design (paired flights, seeded per unit).
 
     Examples
     --------
@@ -106,6 +112,7 @@ class KnowledgeSize:
     surrogate_flights: int = 10
     surrogate_doe_units: int = 6
     surrogate_doe_intensities: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75, 1.0)
+    doe_modes: tuple[str, ...] = MODE_IDS
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ParameterError:
@@ -124,6 +131,11 @@ class KnowledgeSize:
             if not intensities or not all(0.0 < f <= 1.0 for f in intensities):
                 raise bad(name, "a non-empty tuple of floats in (0, 1]")
             object.__setattr__(self, name, intensities)
+        modes = self.doe_modes
+        if isinstance(modes, str) or not isinstance(modes, (tuple, list)) or not modes or len(set(modes)) != len(
+                modes) or not all(m in MODE_IDS for m in modes):
+            raise bad("doe_modes", f"a non-empty tuple of distinct modes of {', '.join(MODE_IDS)}")
+        object.__setattr__(self, "doe_modes", tuple(m for m in MODE_IDS if m in modes))  # one order, one key
 
     @classmethod
     def small(cls) -> KnowledgeSize:
@@ -208,7 +220,7 @@ def knowledge_build(scenario, *, flight_minutes: float | None = None, size: Know
     return KnowledgeBuild.from_scenario(sc, doe_units=size.doe_units, intensities=size.doe_intensities,
                                         minutes=flight_minutes, healthy_units=size.healthy_units,
                                         healthy_flights=size.healthy_flights,
-                                        seed=sc.training_fleet_config().seed)
+                                        seed=sc.training_fleet_config().seed, modes=size.doe_modes)
 
 
 def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **params) -> str:
@@ -314,6 +326,8 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     size = KnowledgeSize() if size is None else size
     params = {"doe_units": size.doe_units, "doe_intensities": list(size.doe_intensities),
               "healthy_units": size.healthy_units, "healthy_flights": size.healthy_flights}
+    if size.doe_modes != MODE_IDS:  # (the key of the full design is unchanged by this field)
+        params["doe_modes"] = list(size.doe_modes)
     key = cache_key("knowledge", sc, flight_minutes=flight_minutes, **params)
     build = knowledge_build(sc, flight_minutes=flight_minutes, size=size)
 
