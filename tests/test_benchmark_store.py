@@ -99,8 +99,11 @@ def test_interrupted_leaderboard_resumes_only_what_is_missing(small_board, tmp_p
 
 def test_dask_loopback_cluster_runs_the_board(small_board, tmp_path):
     """The Dask path (data build task, then sealed evaluations) on a loopback cluster; same rows as locally."""
+    import dataclasses
+
     from dask.distributed import LocalCluster
 
+    small_board = dataclasses.replace(small_board, methods=small_board.methods[:1])  # one sealed run per path
     local = run_board(small_board, tmp_path / "local", flight_minutes=FLIGHT_MINUTES, log=lambda s: None)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1",
                       dashboard_address=None, silence_logs=40) as cluster:

@@ -78,16 +78,16 @@ class DesignOfExperiments:
         return [("healthy", 0.0)] + [(m, float(f)) for m in self.modes for f in self.intensities]
 
 
-def run_doe(doe: DesignOfExperiments, *, batch_size: int = 29, extraction=None,
+def run_doe(doe: DesignOfExperiments, *, batch_size: int | None = None, extraction=None,
             progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Simulate the design and extract the indicators of every flight.
 
     Parameters
     ----------
     doe : DesignOfExperiments
-    batch_size : int, default=29
-        Flights simulated together (one unit's cases by default); also the
-        size of the pieces spread over the workers.
+    batch_size : int or None, default=None
+        Flights simulated together; None: one unit's cases (29 with the seven
+        modes at four intensities). The pieces spread over the workers.
     extraction : ExtractionConfig, optional
     progress : callable, optional
         Called with the number of flights done after each batch.
@@ -106,6 +106,7 @@ def run_doe(doe: DesignOfExperiments, *, batch_size: int = 29, extraction=None,
     from fuelhm_bench.datasets.parallel import run_ordered
 
     total = doe.n_flights
+    batch_size = len(doe.cases()) if batch_size is None else batch_size
     tasks = [(doe, s, min(s + batch_size, total), extraction) for s in range(0, total, batch_size)]
     parts = run_ordered(_doe_part, tasks, workers=workers, sizes=[t[2] - t[1] for t in tasks], progress=progress)
     return pd.concat(parts, ignore_index=True)

@@ -29,8 +29,9 @@ def fleet_indicators(config: FleetConfig, *, batch_size: int = 16, extraction=No
     config : FleetConfig
         What to simulate.
     batch_size : int, default=16
-        Flights simulated together (memory bound); also the size of the pieces
-        spread over the workers.
+        Flights simulated together (memory bound); with several workers, the
+        pieces spread over them are smaller when that gives each worker at
+        least four (load balance).
     extraction : ExtractionConfig, optional
         Indicator extraction settings.
     progress : callable, optional
@@ -47,8 +48,8 @@ def fleet_indicators(config: FleetConfig, *, batch_size: int = 16, extraction=No
     from fuelhm_bench.datasets.parallel import run_ordered
 
     total = config.n_units * config.n_flights
-    starts = list(range(0, total, batch_size))
-    tasks = [(config, s, min(s + batch_size, total), batch_size, extraction) for s in starts]
+    piece = batch_size if workers <= 1 else max(1, min(batch_size, -(-total // (4 * workers))))  # >= 4 per worker
+    tasks = [(config, s, min(s + piece, total), piece, extraction) for s in range(0, total, piece)]
     parts = run_ordered(_fleet_part, tasks, workers=workers, sizes=[t[2] - t[1] for t in tasks], progress=progress)
     return (pd.concat([p[0] for p in parts], ignore_index=True),
             pd.concat([p[1] for p in parts], ignore_index=True))
