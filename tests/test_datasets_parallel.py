@@ -62,3 +62,20 @@ def test_workers_must_be_a_positive_integer(bad):
     with pytest.raises(ParameterError, match="'workers' parameter of here must be an integer >= 1"):
         check_workers(bad, "here")
     assert check_workers(None, "here") >= 1
+
+
+def test_ctrl_c_ends_the_workers_and_the_next_call_starts_afresh():
+    from fuelhm_bench.datasets import parallel
+
+    def interrupt(_n: int) -> None:
+        raise KeyboardInterrupt
+
+    run_ordered(_square_plus, [(1, 0), (2, 0)], workers=2)
+    processes = list(parallel._POOLS[2]._processes.values())
+    with pytest.raises(KeyboardInterrupt):
+        run_ordered(_square_plus, [(k, 0) for k in range(6)], workers=2, progress=interrupt)
+    assert 2 not in parallel._POOLS
+    for p in processes:
+        p.join(timeout=10)
+        assert not p.is_alive()
+    assert run_ordered(_square_plus, [(k, 0) for k in range(3)], workers=2) == [0, 1, 4]
