@@ -87,7 +87,7 @@ def run_doe(doe: DesignOfExperiments, *, batch_size: int | None = None, extracti
     doe : DesignOfExperiments
     batch_size : int or None, default=None
         Flights simulated together; None: one unit's cases (29 with the seven
-        modes at four intensities). The pieces spread over the workers.
+        modes at four intensities), at most 29. The pieces spread over the workers.
     extraction : ExtractionConfig, optional
     progress : callable, optional
         Called with the number of flights done after each batch.
@@ -106,7 +106,7 @@ def run_doe(doe: DesignOfExperiments, *, batch_size: int | None = None, extracti
     from fuelhm_bench.datasets.parallel import run_ordered
 
     total = doe.n_flights
-    batch_size = len(doe.cases()) if batch_size is None else batch_size
+    batch_size = min(len(doe.cases()), 29) if batch_size is None else batch_size  # memory bound as in 0.1
     tasks = [(doe, s, min(s + batch_size, total), extraction) for s in range(0, total, batch_size)]
     parts = run_ordered(_doe_part, tasks, workers=workers, sizes=[t[2] - t[1] for t in tasks], progress=progress)
     return pd.concat(parts, ignore_index=True)
