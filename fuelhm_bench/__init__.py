@@ -4,7 +4,7 @@ from fuelhm_bench import _numba_cache  # noqa: F401 - first: numba caches go out
 
 from fuelhm_bench.taxonomy import EFFECT_IDS, INDICATOR_NAMES, INDICATOR_UNITS, MODE_IDS
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"  # the one source of the version (pyproject.toml reads it)
 
 __all__ = ["EFFECT_IDS", "INDICATOR_NAMES", "INDICATOR_UNITS", "MODE_IDS", "__version__"]
 

@@ -17,6 +17,7 @@ from fuelhm_bench.benchmark.leaderboard import LeaderboardConfig, plan_tasks, ru
 from fuelhm_bench.benchmark.store import ResultStore, evaluation_key
 from fuelhm_bench.cli import main
 from fuelhm_bench.errors import ScenarioError
+from sizes import FLIGHT_MINUTES
 
 METHODS = """methods:
   - fuelhm_baselines.trivial:NullMethod
@@ -52,6 +53,66 @@ def test_key_covers_every_field():
                          ("package_version", "0.2.0"), ("method", "m:D")]:
         keys.add(evaluation_key(**{**base, field: value}))
     assert len(keys) == 10  # 2.0 and 2 are different typed values
+
+
+@pytest.fixture(scope="module")
+def small_board(tmp_path_factory):
+    """Two trivial methods on a tiny scenario at physics fidelity (the cheapest data build; flights of
+    FLIGHT_MINUTES)."""
+    from conftest import _tiny_scenario
+
+    root = tmp_path_factory.mktemp("small-board")
+    scenario = _tiny_scenario(root, name="tinyboard")
+    cfg = root / "lb.yaml"
+    cfg.write_text("methods:\n  - fuelhm_baselines.trivial:NullMethod\n  - fuelhm_baselines.trivial:RandomMethod\n"
+                   f"scenarios: [{scenario}]\nfidelity: physics\ntimeout_s: 300\n")
+    return LeaderboardConfig.from_yaml(cfg)
+
+
+class _Killed(BaseException):
+    """Stands for the process being killed right after a row is stored."""
+
+
+def test_interrupted_leaderboard_resumes_only_what_is_missing(small_board, tmp_path):
+    """Stopped right after its first stored row, started again: only the missing key is evaluated."""
+    out = tmp_path / "board"
+
+    def die_after_first_row(line: str) -> None:
+        if ": ok" in line:
+            raise _Killed(line)
+
+    with pytest.raises(_Killed):
+        run_board(small_board, out, flight_minutes=FLIGHT_MINUTES, log=die_after_first_row)
+    first = _rows(out / "results.sqlite")
+    assert len(first) == 1
+    lines = []
+    board = run_board(small_board, out, flight_minutes=FLIGHT_MINUTES, log=lines.append)
+    assert lines[0].startswith("1 of 2 evaluations already in") and lines[0].endswith("1 to run.")
+    assert sum(": ok" in line for line in lines) == 1  # one evaluation, the missing one
+    rows = _rows(out / "results.sqlite")
+    assert len(rows) == 2 and set(rows["status"]) == {"ok"} and len(board) == 2
+    assert rows.set_index("key").loc[first["key"], "created"].tolist() == first["created"].tolist()
+    lines.clear()
+    run_board(small_board, out, flight_minutes=FLIGHT_MINUTES, log=lines.append)
+    assert lines == [f"2 of 2 evaluations already in {out / 'results.sqlite'}; 0 to run"]
+
+
+def test_dask_loopback_cluster_runs_the_board(small_board, tmp_path):
+    """The Dask path (data build task, then sealed evaluations) on a loopback cluster; same rows as locally."""
+    import dataclasses
+
+    from dask.distributed import LocalCluster
+
+    small_board = dataclasses.replace(small_board, methods=small_board.methods[:1])  # one sealed run per path
+    local = run_board(small_board, tmp_path / "local", flight_minutes=FLIGHT_MINUTES, log=lambda s: None)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1",
+                      dashboard_address=None, silence_logs=40) as cluster:
+        dask = run_board(small_board, tmp_path / "dask", scheduler=cluster.scheduler_address,
+                         flight_minutes=FLIGHT_MINUTES, log=lambda s: None)
+    cols = ["method", "params", "status", "summary_score", "fpr_standard_thr", "fnr_standard_thr"]
+    pd.testing.assert_frame_equal(local[cols], dask[cols])
+    with ResultStore(tmp_path / "dask" / "results.sqlite") as store:
+        assert store.keys() == {t.key for t in plan_tasks(small_board)}
 
 
 @pytest.mark.slow  # about 2 minutes on the loaded 2-core machine (three runs of a subprocess leaderboard)

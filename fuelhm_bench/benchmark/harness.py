@@ -192,7 +192,7 @@ def split_training(train: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
 
 def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | None = None, scale: float = 1.0,
                        flight_minutes: float | None = None, robustness: bool = True, knowledge_size=None,
-                       cache_dir=None, progress=None) -> EnvEvaluation:
+                       cache_dir=None, progress=None, workers: int = 1) -> EnvEvaluation:
     """Load a scenario, get its published knowledge and training flights (cached), make the environment.
 
     The data: the published knowledge from the benchmark's own simulations of the published
@@ -226,6 +226,9 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
         Cache of the simulated products (see :mod:`fuelhm_bench.datasets.cache`).
     progress : callable, optional
         Called with numbers of flights simulated while building them.
+    workers : int, default=1
+        Processes simulating the products not yet cached, in parallel; the data
+        are byte-identical for any number (:mod:`fuelhm_bench.datasets.parallel`).
 
     Returns
     -------
@@ -246,7 +249,10 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
                              f"Got {scale!r} instead.")
     size = KnowledgeSize.coerce(knowledge_size, "prepare_evaluation")
     fidelity = sc.fidelity if fidelity is None else fidelity
-    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
+    from fuelhm_bench.datasets.parallel import check_workers
+
+    workers = check_workers(workers, "prepare_evaluation")
+    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress, "workers": workers}
     knowledge = published_knowledge(sc, size=size, **common)
     fit_part, cal_part = split_training(training_indicators(sc, **common))
     from fuelhm_bench.flights.scale import scaled_unit_count  # every mode of the fleet stays represented

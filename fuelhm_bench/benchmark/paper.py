@@ -53,17 +53,22 @@ class PaperResult:
 
 def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3, 5), scale: float = 1.0,
               progress: Callable[[int], object] | None = None, on_stage: Callable[[str], object] | None = None,
-              cache_dir=None, timeout_s: float = 600.0) -> PaperResult:
+              cache_dir=None, timeout_s: float = 600.0, workers: int | None = None) -> PaperResult:
     """Run the study through the benchmark's harness.
 
     The data are those of every evaluation (:func:`~fuelhm_bench.benchmark.harness.prepare_evaluation`,
     physics fidelity, cached); the paper's method
     (``fuelhm_baselines.paper_mahalanobis:PaperMahalanobis``, ``a=2``) runs sealed
     (:func:`~fuelhm_bench.benchmark.harness.run_in_env`) with the signatures of the
-    two modes of the study. ``scale`` < 1 shrinks the scored fleet (quick checks).
+    two modes of the study. The design of experiments flies those two modes only
+    (the laws of a mode do not depend on the other modes of the design).
+    ``scale`` < 1 shrinks the scored fleet (quick checks).
+    ``workers`` processes simulate what is not cached (None: every CPU this
+    process may use); the results are byte-identical for any number.
     """
     from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
     from fuelhm_bench.datasets.cache import KnowledgeSize, resolve_scenario
+    from fuelhm_bench.datasets.parallel import check_workers
     from fuelhm_bench.errors import MethodError
     from fuelhm_bench.methods import Knowledge
     from fuelhm_bench.scoring import ScoringConfig, score_run
@@ -74,8 +79,8 @@ def run_paper(scenario="paper_2012", *, doe_units: int = 8, a_values=(0, 1, 2, 3
     t0 = time.perf_counter()
     stage("data: published knowledge (design of experiments, ITL, signatures), training and scored flights")
     evaluation = prepare_evaluation(sc, fidelity="physics", scale=scale, robustness=False,
-                                    knowledge_size=KnowledgeSize(doe_units=doe_units), cache_dir=cache_dir,
-                                    progress=progress)
+                                    knowledge_size=KnowledgeSize(doe_units=doe_units, doe_modes=PAPER_MODES), cache_dir=cache_dir,
+                                    progress=progress, workers=check_workers(workers, "run_paper"))
     knowledge = evaluation.knowledge
     timings["data_s"] = time.perf_counter() - t0
 

@@ -35,17 +35,31 @@ def _md(df: pd.DataFrame, digits: int = 1) -> str:
     return to_markdown(df.round(digits).reset_index() if isinstance(df.index, pd.MultiIndex) else df.round(digits))
 
 
-def _figures(r: PaperResult, out: Path) -> list[Path]:
+def model_figures(mission, out) -> list[Path]:
+    """Write the figures that do not depend on the study's results (Figs. 4, 5 and 8).
+
+    Parameters
+    ----------
+    mission : MissionProfile or None
+        The scenario's flight profile (Figs. 4 and 5 fly one healthy flight of it); None: the default.
+    out : path-like
+        Output directory.
+
+    Returns
+    -------
+    list of Path
+    """
     from fuelhm_bench.flights.fleet import FleetConfig, iter_flights
     from fuelhm_bench.flights.sweep import VelocityGainSweep, run_sweep
     from fuelhm_bench.indicators import ExtractionConfig, extract_indicators, velocity_gain_curve, velocity_points
     from fuelhm_bench.indicators.plot import velocity_gain_figure
     from fuelhm_bench.physics.model import LoopModel
-    from fuelhm_bench.scoring import plot_score_distributions, save_figure
+    from fuelhm_bench.scoring import save_figure
 
+    out = Path(out)
     paths = []
     # Figs. 4 and 5: one healthy in-flight curve, raw and smoothed; then with the indicators.
-    fleet = FleetConfig(n_units=1, n_flights=1, mission=r.mission) if r.mission is not None else FleetConfig(
+    fleet = FleetConfig(n_units=1, n_flights=1, mission=mission) if mission is not None else FleetConfig(
         n_units=1, n_flights=1)
     fl = next(iter_flights(fleet, batch_size=1))[0].as_flight_arrays()
     i, v = velocity_points(fl.time_s, fl.current_ma, fl.position_mm)
@@ -67,13 +81,24 @@ def _figures(r: PaperResult, out: Path) -> list[Path]:
             labels.append(f"{mode} {f:.0%}")
         fig = velocity_gain_figure(None, None, curves, None, labels=labels, title=f"Fig. 8 - {mode}")
         paths.append(save_figure(fig, out / f"fig8{name}.png"))
+    return paths
+
+
+def _figures(r: PaperResult, out: Path, model_paths=None) -> list[Path]:
+    from fuelhm_bench.scoring import plot_score_distributions, save_figure
+
+    paths = model_figures(r.mission, out) if model_paths is None else list(model_paths)
     # Fig. 10: global-score distributions with thresholds.
     paths.append(save_figure(plot_score_distributions(r.run, r.scorecard.config), out / "fig10_scores.png"))
     return paths
 
 
-def write_outputs(r: PaperResult, out: Path) -> list[Path]:
-    """Write the tables, figures and report.md; returns the paths written."""
+def write_outputs(r: PaperResult, out: Path, model_paths=None) -> list[Path]:
+    """Write the tables, figures and report.md; returns the paths written.
+
+    ``model_paths``: the figures :func:`model_figures` already wrote into ``out``
+    (e.g. on another core while the study ran); None: they are drawn now.
+    """
     out = Path(out)
     paths = []
     for name, table in (("table_iv.csv", r.table_iv), ("table_v.csv", r.table_v), ("table_vi.csv", r.table_vi)):
@@ -83,7 +108,7 @@ def write_outputs(r: PaperResult, out: Path) -> list[Path]:
     from fuelhm_bench.scoring import write_tables
 
     paths += write_tables(r.scorecard, out / "scorer", formats=("csv", "md"), overwrite=True)
-    paths += _figures(r, out)
+    paths += _figures(r, out, model_paths)
     report = out / "report.md"
     report.write_text(render_report(r))
     paths.append(report)

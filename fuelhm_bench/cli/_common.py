@@ -8,6 +8,7 @@ import re
 import sys
 from pathlib import Path
 
+from fuelhm_bench.io.outputs import atomic_directory  # noqa: F401 - the commands' output folders
 from fuelhm_bench.io.outputs import check_output_dir as _check_output_dir
 from fuelhm_bench.io.outputs import check_output_path
 
@@ -79,16 +80,19 @@ def bounded(kind: type, low: float | None = None, high: float | None = None, uni
     return parse
 
 
-def check_run_budget(units: int, flights: int, minutes: float, frame_rate_hz: float = 100.0) -> None:
+def check_run_budget(units: int, flights: int, minutes: float, frame_rate_hz: float = 100.0, *,
+                     what: str | None = None) -> None:
     """Refuse a simulation above the run budget (flight-hours), with its estimate.
 
     The budget and its opt-in are those of scenarios
     (:func:`fuelhm_bench.scenarios.run_budget`: ``FUELHM_RUN_BUDGET_FLIGHT_HOURS``).
+    ``units x flights`` flights of ``minutes`` are simulated; ``what`` says how
+    the command's options make them (default: ``--units U x --flights F x --minutes M``).
 
     Raises
     ------
     ParameterError
-        Naming --units, --flights and --minutes, the estimate and how to allow it.
+        Naming the options, the estimate and how to allow it.
     """
     import math
 
@@ -99,7 +103,8 @@ def check_run_budget(units: int, flights: int, minutes: float, frame_rate_hz: fl
     budget, origin = run_budget(None)
     if cost.flight_hours > budget:
         raise ParameterError(
-            f"--units {units} x --flights {flights} x --minutes {minutes:g} is {cost.flight_hours:.4g} flight-hours "
+            f"{what or f'--units {units} x --flights {flights} x --minutes {minutes:g}'} is "
+            f"{cost.flight_hours:.4g} flight-hours "
             f"({cost.describe()}), above the run budget of {budget:g} flight-hours ({origin}). To allow it, set "
             f"{RUN_BUDGET_ENV}={math.ceil(cost.flight_hours)}.")
 

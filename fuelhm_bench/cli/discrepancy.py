@@ -37,14 +37,10 @@ OUTPUT_FILES = ("report.md", "augmented_model.yaml", "result.json", "curves.png"
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    import contextlib
 
-    from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy
-    from fuelhm_bench.calibration.report import json_text, write_discrepancy_report
-    from fuelhm_bench.cli._common import check_output_dir, progress_bar
-    from fuelhm_bench.io import read_flights, split_flights
-    from fuelhm_bench.physics.model import load_model, save_model
-
+    from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig
+    from fuelhm_bench.cli._common import atomic_directory
     from fuelhm_bench.errors import UnknownNameError, did_you_mean
     from fuelhm_bench.taxonomy import EFFECT_IDS
 
@@ -58,9 +54,22 @@ def run(args: argparse.Namespace) -> int:
                                f"'{args.candidates}' instead.")
     config = DiscrepancyConfig(holdout_fraction=args.holdout, candidates=candidates, n_jobs=args.jobs,
                                seed=args.seed)
-    out_dir = None
-    if args.out:
-        out_dir = check_output_dir(args.out, force=args.force, names=OUTPUT_FILES)
+    publish = contextlib.nullcontext(None)
+    if args.out:  # checked now; published (atomically) only when every file is written
+        publish = atomic_directory(args.out, force=args.force, names=OUTPUT_FILES)
+    with publish as out_dir:
+        return _run(args, config, out_dir)
+
+
+def _run(args: argparse.Namespace, config, out_dir) -> int:
+    from pathlib import Path
+
+    from fuelhm_bench.calibration.discrepancy import find_discrepancy
+    from fuelhm_bench.calibration.report import json_text, write_discrepancy_report
+    from fuelhm_bench.cli._common import progress_bar
+    from fuelhm_bench.io import read_flights, split_flights
+    from fuelhm_bench.physics.model import load_model, save_model
+
     model = load_model(args.model) if args.model else None
     flights, rejected = split_flights(read_flights(args.flights), source=str(args.flights))
     for r in rejected:
@@ -69,15 +78,16 @@ def run(args: argparse.Namespace) -> int:
     def log(msg: str) -> None:
         print(msg, file=sys.stderr)
 
-    with progress_bar(1 + len(candidates), "fitting", unit="fit") as bar:
+    with progress_bar(1 + len(config.candidates), "fitting", unit="fit") as bar:
         result = find_discrepancy(flights, model, config=config, progress=bar.update, log=log)
     payload = result.as_json()
     if out_dir is not None:
-        model_path = Path(out_dir) / "augmented_model.yaml"
-        save_model(result.model, model_path, overwrite=True,
+        model_path = Path(args.out) / "augmented_model.yaml"  # where it is published (written in out_dir first)
+        save_model(result.model, Path(out_dir) / model_path.name, overwrite=True,
                    header=f"fuelhm-bench discrepancy {args.flights}: effect {result.effect}; held-out gap "
                           f"{result.gap_before:.3f} -> {result.gap_after:.3f} mm/s")
-        report = write_discrepancy_report(result, out_dir, model_file=str(model_path), data_name=str(args.flights))
+        report = Path(args.out) / write_discrepancy_report(result, out_dir, model_file=str(model_path),
+                                                           data_name=str(args.flights)).name
         payload["model_file"] = str(model_path)
         payload["report"] = str(report)
         log(f"wrote {report} and {model_path}")

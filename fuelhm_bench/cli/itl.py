@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from fuelhm_bench.cli._common import bounded, check_output_dir, non_negative_int, progress_bar
+from fuelhm_bench.cli._common import atomic_directory, bounded, check_run_budget, non_negative_int, progress_bar
 
 
 def register(sub) -> None:
@@ -25,6 +25,8 @@ def register(sub) -> None:
     p.add_argument("--healthy-units", type=bounded(int, 1, 10_000), default=8, help="units of the healthy fleet (default 8)")
     p.add_argument("--healthy-flights", type=bounded(int, 1, 10_000), default=5, help="flights per healthy unit (default 5)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="master seed (default 0)")
+    p.add_argument("--jobs", type=bounded(int, 1, 1024), default=None,
+                   help="processes simulating in parallel (default: every CPU available); results do not depend on it")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=run)
 
@@ -32,6 +34,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.errors import ParameterError
     from fuelhm_bench.datasets.knowledge import KnowledgeBuild, build_knowledge, write_knowledge
+    from fuelhm_bench.datasets.parallel import check_workers
 
     try:
         intensities = tuple(float(x) for x in args.intensities.split(","))
@@ -40,18 +43,25 @@ def run(args: argparse.Namespace) -> int:
     if not all(0.0 < x <= 1.0 for x in intensities):
         raise ParameterError(f"--intensities must be comma-separated numbers in (0, 1]. Got '{args.intensities}' "
                              "instead.")
-    out = check_output_dir(args.out)
     build = KnowledgeBuild.from_scenario(args.scenario, doe_units=args.units, intensities=intensities,
                                          minutes=args.minutes, healthy_units=args.healthy_units,
                                          healthy_flights=args.healthy_flights, seed=args.seed)
+    mission = build.doe.mission
+    minutes = mission.duration_s / 60.0
+    cases = len(build.doe.cases())
+    check_run_budget(1, build.n_flights, minutes, 1.0 / mission.frame_s,
+                     what=f"--units {args.units} x {cases} cases (healthy + {len(build.doe.modes)} modes x "
+                          f"{len(intensities)} intensities) + --healthy-units {args.healthy_units} x "
+                          f"--healthy-flights {args.healthy_flights} = {build.n_flights} flights of {minutes:g} min")
     t0 = time.perf_counter()
-    with progress_bar(build.n_flights, "ITL design of experiments") as bar:
-        result = build_knowledge(build, progress=bar.update)
-    paths = write_knowledge(result, out)
-    paths += write_diagnosability(result, out)
+    with atomic_directory(args.out) as tmp:  # nothing is published unless every file is written
+        with progress_bar(build.n_flights, "ITL design of experiments") as bar:
+            result = build_knowledge(build, progress=bar.update, workers=check_workers(args.jobs, "itl"))
+        paths = write_knowledge(result, tmp)
+        paths += write_diagnosability(result, tmp)
     n_bad = int((result.itl.table["r2"] < 0.8).sum())
     print(f"{len(result.itl.table)} laws ({n_bad} with r2 < 0.8) from {build.n_flights} flights in "
-          f"{time.perf_counter() - t0:.1f} s; wrote {', '.join(p.name for p in paths)} to {out}")
+          f"{time.perf_counter() - t0:.1f} s; wrote {', '.join(p.name for p in paths)} to {args.out}")
     return 0
 
 

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
-from fuelhm_bench.cli._common import check_output_dir, positive_float, positive_int, progress_bar
+from fuelhm_bench.cli._common import atomic_directory, positive_float, positive_int, progress_bar
 
 
 def register(sub) -> None:
@@ -20,27 +21,35 @@ def register(sub) -> None:
     p.add_argument("--scale", type=positive_float, default=1.0,
                    help="shrink the fleets (e.g. 0.2 for a quick look); 1 = the scenario as written")
     p.add_argument("--cache-dir", default=None, help="cache of simulated knowledge and flights")
+    p.add_argument("--jobs", type=positive_int, default=None,
+                   help="processes simulating in parallel (default: every CPU available); results do not depend on it")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.benchmark.paper import run_paper
-    from fuelhm_bench.benchmark.paper_report import print_tables, write_outputs
+    from fuelhm_bench.benchmark.paper_report import model_figures, print_tables, write_outputs
+    from fuelhm_bench.datasets.parallel import check_workers, submit
     from fuelhm_bench.scenarios import load_scenario
 
-    out = check_output_dir(args.out)
+    out = Path(args.out)
     sc = load_scenario(args.scenario)
-    with progress_bar(0, "paper study") as bar:
-        def grow(n: int) -> None:  # the total is unknown: the cache may answer
-            bar.total += n
-            bar.update(n)
+    workers = check_workers(args.jobs, "--jobs")
+    with atomic_directory(out) as tmp:  # checked now; nothing is published unless every file is written
+        # Figs. 4, 5 and 8 do not depend on the study: drawn on a core as soon as one is free.
+        figures = submit(model_figures, sc.test_fleet_config().mission, tmp, workers=workers)
+        with progress_bar(0, "paper study") as bar:
+            def grow(n: int) -> None:  # the total is unknown: the cache may answer
+                bar.total += n
+                bar.update(n)
 
-        result = run_paper(sc, doe_units=args.doe_units, scale=args.scale, progress=grow, cache_dir=args.cache_dir,
-                           on_stage=lambda s: bar.set_postfix_str(s[:40]) if not bar.disable
-                           else print(f"[paper] {s}", file=sys.stderr))
-    print_tables(result)
-    paths = write_outputs(result, out)
+            result = run_paper(sc, doe_units=args.doe_units, scale=args.scale, progress=grow,
+                               cache_dir=args.cache_dir, workers=workers,
+                               on_stage=lambda s: bar.set_postfix_str(s[:40]) if not bar.disable
+                               else print(f"[paper] {s}", file=sys.stderr))
+        print_tables(result)
+        paths = write_outputs(result, tmp, figures.result())
     print(f"\nwrote {len(paths)} files to {out} (report: {out / 'report.md'}); "
           f"total {result.timings['total_s']:.1f} s")
     return 0

@@ -50,6 +50,7 @@ import pandas as pd
 
 from fuelhm_bench._numba_cache import CACHE_ENV_VAR  # the variable overriding the cache directory
 from fuelhm_bench.errors import ParameterError, parameter_error
+from fuelhm_bench.taxonomy import MODE_IDS
 
 __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
            "knowledge_build", "published_knowledge", "resolve_scenario", "scored_indicators",
@@ -91,6 +92,11 @@ class KnowledgeSize:
         are learnt on (the scored fleet's model), >= 1.
     surrogate_doe_intensities : tuple of float, default=(0.1, 0.25, 0.5, 0.75, 1.0)
         Its intensities, each in (0, 1].
+    doe_modes : tuple of str, default=MODE_IDS
+        Modes of the published design of experiments (the ITL and signatures
+        have these modes only). A study of some modes (the paper's two) need
+        not fly the others: the laws of a mode do not depend on which other
+        modes are in the design (paired flights, seeded per unit).
 
     Examples
     --------
@@ -106,6 +112,7 @@ class KnowledgeSize:
     surrogate_flights: int = 10
     surrogate_doe_units: int = 6
     surrogate_doe_intensities: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75, 1.0)
+    doe_modes: tuple[str, ...] = MODE_IDS
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ParameterError:
@@ -124,6 +131,11 @@ class KnowledgeSize:
             if not intensities or not all(0.0 < f <= 1.0 for f in intensities):
                 raise bad(name, "a non-empty tuple of floats in (0, 1]")
             object.__setattr__(self, name, intensities)
+        modes = self.doe_modes
+        if isinstance(modes, str) or not isinstance(modes, (tuple, list)) or not modes or len(set(modes)) != len(
+                modes) or not all(m in MODE_IDS for m in modes):
+            raise bad("doe_modes", f"a non-empty tuple of distinct modes of {', '.join(MODE_IDS)}")
+        object.__setattr__(self, "doe_modes", tuple(m for m in MODE_IDS if m in modes))  # one order, one key
 
     @classmethod
     def small(cls) -> KnowledgeSize:
@@ -208,7 +220,7 @@ def knowledge_build(scenario, *, flight_minutes: float | None = None, size: Know
     return KnowledgeBuild.from_scenario(sc, doe_units=size.doe_units, intensities=size.doe_intensities,
                                         minutes=flight_minutes, healthy_units=size.healthy_units,
                                         healthy_flights=size.healthy_flights,
-                                        seed=sc.training_fleet_config().seed)
+                                        seed=sc.training_fleet_config().seed, modes=size.doe_modes)
 
 
 def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **params) -> str:
@@ -284,7 +296,7 @@ def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callabl
 
 def published_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                         cache_dir: str | os.PathLike | bool | None = None,
-                        progress: Callable[[int], object] | None = None):
+                        progress: Callable[[int], object] | None = None, workers: int = 1):
     """The published knowledge of a scenario (as :func:`fuelhm_bench.datasets.knowledge.build_knowledge` builds it), cached.
 
     Parameters
@@ -299,6 +311,9 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
         Disk cache directory; None: :func:`default_cache_dir`; False: memory only.
     progress : callable, optional
         Called with numbers of flights simulated (only when building).
+    workers : int, default=1
+        Processes simulating in parallel (only when building); the product is
+        byte-identical for any number (:mod:`fuelhm_bench.datasets.parallel`).
 
     Returns
     -------
@@ -312,11 +327,13 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     size = KnowledgeSize() if size is None else size
     params = {"doe_units": size.doe_units, "doe_intensities": list(size.doe_intensities),
               "healthy_units": size.healthy_units, "healthy_flights": size.healthy_flights}
+    if size.doe_modes != MODE_IDS:  # (the key of the full design is unchanged by this field)
+        params["doe_modes"] = list(size.doe_modes)
     key = cache_key("knowledge", sc, flight_minutes=flight_minutes, **params)
     build = knowledge_build(sc, flight_minutes=flight_minutes, size=size)
 
     def make() -> dict[str, pd.DataFrame]:
-        result = build_knowledge(build, progress=progress)
+        result = build_knowledge(build, progress=progress, workers=workers)
         return {"healthy": result.healthy_table, "doe": result.doe_table}
 
     def finish(tables: dict[str, pd.DataFrame]):
@@ -329,7 +346,7 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
 def training_indicators(scenario, *, flight_minutes: float | None = None, units: int | None = None,
                         flights: int | None = None, drifted: bool = False,
                         cache_dir: str | os.PathLike | bool | None = None,
-                        progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+                        progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Indicator table of the scenario's healthy training fleet (what methods are fitted on), cached.
 
     Parameters
@@ -345,6 +362,8 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
         model (the scored fleet's healthy state); training data never has it.
     cache_dir : str, path-like, False or None, default=None
     progress : callable, optional
+    workers : int, default=1
+        Processes simulating in parallel (only when building; same bytes for any number).
 
     Returns
     -------
@@ -365,7 +384,7 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
     key = cache_key("training", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
-        return {"table": fleet_indicators(config, progress=progress)[0]}
+        return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
 
     table = _cached(key, _entry(cache_dir, "training", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "training", "flight_minutes": flight_minutes, **params})
@@ -374,7 +393,7 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
 
 def scored_indicators(scenario, *, flight_minutes: float | None = None, units: int | None = None,
                       drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
-                      progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+                      progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Indicator table of the scenario's scored fleet, as flown without maintenance, cached.
 
     These are the physics observations of ``FuelHM/ActuationLoop-v2`` replaying
@@ -392,6 +411,8 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
         Whether the fleet carries the scenario's nominal-parameter drift.
     cache_dir : str, path-like, False or None, default=None
     progress : callable, optional
+    workers : int, default=1
+        Processes simulating in parallel (only when building; same bytes for any number).
 
     Returns
     -------
@@ -410,7 +431,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
     key = cache_key("scored", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
-        return {"table": fleet_indicators(config, progress=progress)[0]}
+        return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
 
     table = _cached(key, _entry(cache_dir, "scored", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "scored", "flight_minutes": flight_minutes, **params})
@@ -419,7 +440,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
 
 def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                   drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
-                  progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+                  progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Design of experiments on the scored fleet's model (what the surrogate's responses are learnt on), cached.
 
     Unlike the published DOE (:func:`published_knowledge`, on the published
@@ -449,7 +470,7 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     key = cache_key("surrogate-doe", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
-        return {"table": run_doe(doe, progress=progress)}
+        return {"table": run_doe(doe, progress=progress, workers=workers)}
 
     table = _cached(key, _entry(cache_dir, "surrogate-doe", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "surrogate-doe", "flight_minutes": flight_minutes, **params})
@@ -458,7 +479,7 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
 
 def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                       drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
-                      progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+                      progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Healthy flights of new units of the scored fleet's model (what the surrogate's healthy law is learnt on), cached.
 
     ``size.surrogate_units x size.surrogate_flights`` healthy flights of units
@@ -488,7 +509,7 @@ def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: Kn
     key = cache_key("surrogate-healthy", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
-        return {"table": fleet_indicators(config, progress=progress)[0]}
+        return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
 
     table = _cached(key, _entry(cache_dir, "surrogate-healthy", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "surrogate-healthy", "flight_minutes": flight_minutes, **params})
@@ -497,7 +518,7 @@ def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: Kn
 
 def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
                         drifted: bool = True, cache_dir: str | os.PathLike | bool | None = None,
-                        progress: Callable[[int], object] | None = None):
+                        progress: Callable[[int], object] | None = None, workers: int = 1):
     """What the surrogate fidelity is learnt from: physics flights of new units of the scored fleet's model.
 
     ``healthy_table``: :func:`surrogate_healthy` (units independent of the
@@ -515,7 +536,7 @@ def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     from fuelhm_bench.datasets.knowledge import KnowledgeResult
 
     size = KnowledgeSize() if size is None else size
-    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
+    common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress, "workers": workers}
     published = published_knowledge(scenario, size=size, **common)
     table = surrogate_healthy(scenario, size=size, drifted=drifted, **common)
     doe = surrogate_doe(scenario, size=size, drifted=drifted, **common)

@@ -78,9 +78,23 @@ class DesignOfExperiments:
         return [("healthy", 0.0)] + [(m, float(f)) for m in self.modes for f in self.intensities]
 
 
-def run_doe(doe: DesignOfExperiments, *, batch_size: int = 29, extraction=None,
-            progress: Callable[[int], object] | None = None) -> pd.DataFrame:
+def run_doe(doe: DesignOfExperiments, *, batch_size: int | None = None, extraction=None,
+            progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Simulate the design and extract the indicators of every flight.
+
+    Parameters
+    ----------
+    doe : DesignOfExperiments
+    batch_size : int or None, default=None
+        Flights simulated together; None: one unit's cases (29 with the seven
+        modes at four intensities), at most 29. The pieces spread over the workers.
+    extraction : ExtractionConfig, optional
+    progress : callable, optional
+        Called with the number of flights done after each batch.
+    workers : int, default=1
+        Processes simulating batches in parallel
+        (:func:`fuelhm_bench.datasets.parallel.run_ordered`); the table is
+        byte-identical for any number.
 
     Returns
     -------
@@ -89,33 +103,39 @@ def run_doe(doe: DesignOfExperiments, *, batch_size: int = 29, extraction=None,
         with ``mode`` (a mode id or ``"healthy"``) and ``intensity`` columns: the
         DOE table :func:`~fuelhm_bench.diagnosis.itl.fit_itl` expects.
     """
+    from fuelhm_bench.datasets.parallel import run_ordered
+
+    total = doe.n_flights
+    batch_size = min(len(doe.cases()), 29) if batch_size is None else batch_size  # memory bound as in 0.1
+    tasks = [(doe, s, min(s + batch_size, total), extraction) for s in range(0, total, batch_size)]
+    parts = run_ordered(_doe_part, tasks, workers=workers, sizes=[t[2] - t[1] for t in tasks], progress=progress)
+    return pd.concat(parts, ignore_index=True)
+
+
+def _doe_part(doe: DesignOfExperiments, start: int, stop: int, extraction) -> pd.DataFrame:
+    """Indicators of the flights ``start .. stop - 1`` of the design (one piece of :func:`run_doe`)."""
     from fuelhm_bench.indicators import extract_table
 
-    jobs = []
-    flight_id = 0
-    for u in range(doe.n_units):
+    per_unit = len(doe.cases())
+    chunk = []
+    for u in range(start // per_unit, (stop - 1) // per_unit + 1):
         unit = manufacture(doe.nominal, rng_for(doe.seed, _STREAM_DOE_UNIT, u), doe.dispersion)
         inputs = doe.mission.sample(rng_for(doe.seed, _STREAM_DOE_MISSION, u))
-        for mode, f in doe.cases():
-            model = unit if mode == "healthy" else unit.degraded({mode: f})
-            jobs.append((flight_id, u, mode, f, model, inputs))
-            flight_id += 1
-    parts = []
-    for start in range(0, len(jobs), batch_size):
-        chunk = jobs[start:start + batch_size]
-        outs = simulate([j[4] for j in chunk], [j[5] for j in chunk],
-                        [rng_for(doe.seed, _STREAM_DOE_NOISE, j[1]) for j in chunk],
-                        labels=[f"DOE unit {j[1]}, {j[2]} at {j[3]:g}" for j in chunk])
-        flights = [_Flight(j[0], j[1], o.time_s, o.current_a * 1e3, o.measured_position_m * 1e3,
-                           100.0 * j[5].n2_frac)
-                   for j, o in zip(chunk, outs)]
-        table = extract_table(flights, extraction, on_error="flag")
-        table.insert(2, "mode", [j[2] for j in chunk])
-        table.insert(3, "intensity", np.array([j[3] for j in chunk]))
-        parts.append(table)
-        if progress is not None:
-            progress(len(chunk))
-    return pd.concat(parts, ignore_index=True)
+        for c, (mode, f) in enumerate(doe.cases()):
+            flight_id = u * per_unit + c
+            if start <= flight_id < stop:
+                model = unit if mode == "healthy" else unit.degraded({mode: f})
+                chunk.append((flight_id, u, mode, f, model, inputs))
+    outs = simulate([j[4] for j in chunk], [j[5] for j in chunk],
+                    [rng_for(doe.seed, _STREAM_DOE_NOISE, j[1]) for j in chunk],
+                    labels=[f"DOE unit {j[1]}, {j[2]} at {j[3]:g}" for j in chunk])
+    flights = [_Flight(j[0], j[1], o.time_s, o.current_a * 1e3, o.measured_position_m * 1e3,
+                       100.0 * j[5].n2_frac)
+               for j, o in zip(chunk, outs)]
+    table = extract_table(flights, extraction, on_error="flag")
+    table.insert(2, "mode", [j[2] for j in chunk])
+    table.insert(3, "intensity", np.array([j[3] for j in chunk]))
+    return table
 
 
 @dataclass(frozen=True)

@@ -55,7 +55,7 @@ class KnowledgeBuild:
     @classmethod
     def from_scenario(cls, scenario=None, *, doe_units: int = 8, intensities=(0.25, 0.5, 0.75, 1.0),
                       minutes: float | None = None, healthy_units: int = 8, healthy_flights: int = 5,
-                      seed: int = 0) -> KnowledgeBuild:
+                      seed: int = 0, modes: tuple = MODE_IDS) -> KnowledgeBuild:
         """Build settings, from a scenario's published nominal model and mission when given.
 
         Parameters
@@ -65,6 +65,8 @@ class KnowledgeBuild:
             15-minute flights.
         doe_units, intensities, minutes, healthy_units, healthy_flights, seed
             Size of the design and of the healthy fleet; ``minutes`` overrides the flight duration.
+        modes : tuple of str, default=MODE_IDS
+            Modes of the design of experiments.
         """
         nominal = FleetConfig().nominal
         mission = MissionProfile(duration_s=900.0)
@@ -82,8 +84,8 @@ class KnowledgeBuild:
                 max_intensity[s.mode] = s.max_intensity
         if minutes is not None:
             mission = dataclasses.replace(mission, duration_s=60.0 * minutes)
-        doe = DesignOfExperiments(n_units=doe_units, intensities=tuple(intensities), mission=mission,
-                                  nominal=nominal, dispersion=dispersion, seed=seed)
+        doe = DesignOfExperiments(n_units=doe_units, intensities=tuple(intensities), modes=tuple(modes),
+                                  mission=mission, nominal=nominal, dispersion=dispersion, seed=seed)
         healthy = FleetConfig(n_units=healthy_units, n_flights=healthy_flights, mission=mission, nominal=nominal,
                               dispersion=dispersion, seed=seed + 1)
         return cls(doe=doe, healthy_fleet=healthy, max_intensity=max_intensity)
@@ -115,12 +117,17 @@ class KnowledgeResult:
 
 
 def build_knowledge(build: KnowledgeBuild = KnowledgeBuild(), *, extraction=None,
-                    progress: Callable[[int], object] | None = None) -> KnowledgeResult:
-    """Simulate the healthy fleet and the design of experiments; fit the healthy model, ITL and signatures."""
+                    progress: Callable[[int], object] | None = None, workers: int = 1) -> KnowledgeResult:
+    """Simulate the healthy fleet and the design of experiments; fit the healthy model, ITL and signatures.
+
+    ``workers`` processes simulate in parallel (:mod:`fuelhm_bench.datasets.parallel`); the
+    result is byte-identical for any number.
+    """
     from fuelhm_bench.datasets.fleets import fleet_indicators
 
-    healthy_table, _ = fleet_indicators(build.healthy_fleet, extraction=extraction, progress=progress)
-    doe_table = run_doe(build.doe, extraction=extraction, progress=progress)
+    healthy_table, _ = fleet_indicators(build.healthy_fleet, extraction=extraction, progress=progress,
+                                        workers=workers)
+    doe_table = run_doe(build.doe, extraction=extraction, progress=progress, workers=workers)
     healthy_model = HealthyModel().fit(healthy_table)
     itl = fit_itl(doe_table)
     sig = signature_matrix(itl, healthy_model, max_intensity=build.max_intensity)

@@ -126,16 +126,18 @@ class SimulatedFlight:
 
 def build_units(config: FleetConfig) -> list[Unit]:
     """Manufacture the units and draw their degradation schedules."""
-    units = []
-    for u in range(config.n_units):
-        rng = unit_rng(config.seed, u)
-        model = manufacture(config.nominal, rng, config.dispersion)
-        sched = draw_unit_schedule(config.schedules, rng, simultaneous=config.simultaneous)
-        units.append(Unit(u, model, sched))
-    return units
+    return [_build_unit(config, u) for u in range(config.n_units)]
 
 
-def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None) -> Iterator[list[SimulatedFlight]]:
+def _build_unit(config: FleetConfig, u: int) -> Unit:
+    rng = unit_rng(config.seed, u)
+    model = manufacture(config.nominal, rng, config.dispersion)
+    sched = draw_unit_schedule(config.schedules, rng, simultaneous=config.simultaneous)
+    return Unit(u, model, sched)
+
+
+def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None, start: int = 0,
+                 stop: int | None = None) -> Iterator[list[SimulatedFlight]]:
     """Simulate the fleet in batches of flights (bounded memory).
 
     Parameters
@@ -145,13 +147,22 @@ def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None) ->
         Flights simulated together.
     progress : callable, optional
         Called with the number of flights done after each batch.
+    start, stop : int, optional
+        Simulate only the flights ``start .. stop - 1`` of the fleet, in its
+        order (unit by unit, flight by flight); the same flights as in the whole
+        fleet, byte for byte. Default: all.
 
     Yields
     ------
     list of SimulatedFlight
     """
-    units = build_units(config)
-    todo = [(u, f) for u in units for f in range(config.n_flights)]
+    total = config.n_units * config.n_flights
+    first, last = range(total)[start:stop][:1], range(total)[start:stop][-1:]
+    if not first:
+        return
+    units = [_build_unit(config, u) for u in range(first[0] // config.n_flights, last[0] // config.n_flights + 1)]
+    todo = [(u, f) for u in units for f in range(config.n_flights)
+            if first[0] <= u.unit_id * config.n_flights + f <= last[0]]
     for start in range(0, len(todo), batch_size):
         chunk = todo[start:start + batch_size]
         models, inputs, rngs, labels, intens = [], [], [], [], []

@@ -24,6 +24,10 @@ API
     target on success, deletes it on any exception (``KeyboardInterrupt`` too).
 :func:`write_text`
     Atomic text file (e.g. JSON, YAML, Markdown).
+:func:`atomic_directory`
+    Context manager yielding a temporary sibling directory to fill; its
+    content is published into the target directory on success, deleted on
+    any exception (``KeyboardInterrupt`` too).
 
 Examples
 --------
@@ -50,7 +54,8 @@ from pathlib import Path
 
 from fuelhm_bench.errors import OutputPathError
 
-__all__ = ["atomic_output", "check_output_dir", "check_output_path", "temporary_path", "write_text"]
+__all__ = ["atomic_directory", "atomic_output", "check_output_dir", "check_output_path", "temporary_path",
+           "write_text"]
 
 
 def _label(option: str | None, what: str, path: Path) -> str:
@@ -236,3 +241,97 @@ def write_text(path: str | os.PathLike[str], text: str, *, force: bool, what: st
     with atomic_output(path, force=force, what=what, option=option) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
+
+
+@contextlib.contextmanager
+def atomic_directory(path: str | os.PathLike[str], *, force: bool = True, names: Iterable[str] = (),
+                     option: str | None = "--out") -> Iterator[Path]:
+    """Fill an output directory atomically: yield a temporary sibling, publish its content on success.
+
+    The command writes every file into the yielded directory (a hidden
+    ``.tmp-<random>-<name>`` next to ``path``). On success, a new ``path`` is
+    the temporary directory renamed (one atomic step); into an existing
+    ``path`` each written file is renamed onto its target (each one atomic),
+    and files of ``path`` the command did not write are left alone. On any
+    exception, ``KeyboardInterrupt`` included, the temporary directory is
+    deleted and ``path`` is left as it was: an interrupted run publishes
+    nothing.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The output directory.
+    force : bool, default=True
+        Whether files listed in ``names`` that already exist may be replaced.
+    names : iterable of str, default=()
+        Files the command will write; without ``force`` any that exists is refused.
+    option : str or None, default="--out"
+        Option named in messages.
+
+    Yields
+    ------
+    pathlib.Path
+        The temporary directory to write into.
+
+    Raises
+    ------
+    OutputPathError
+        As :func:`check_output_dir` (checked before and again at publication).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp()) / "out"
+    >>> with atomic_directory(d) as tmp:
+    ...     _ = (tmp / "a.txt").write_text("hello")
+    ...     d.exists()
+    False
+    >>> sorted(p.name for p in d.iterdir())
+    ['a.txt']
+    """
+    target = Path(path)
+    names = tuple(names)
+    label = _label(option, "output directory", target)
+    if target.exists():
+        check_output_dir(target, force=force, names=names, option=option)
+    else:
+        blocker = _blocking_file(target)
+        if blocker is not None:
+            raise OutputPathError(f"Cannot use {label}: '{blocker}' is a file, not a directory.")
+        _make_parent(target, option, "output directory")
+    tmp = temporary_path(target)
+    try:
+        tmp.mkdir()
+    except OSError as exc:
+        raise OutputPathError(f"Cannot write {label}: {exc.strerror or exc}.") from None
+    try:
+        yield tmp
+        if target.exists():
+            check_output_dir(target, force=force, names=names, option=option)  # appeared meanwhile?
+            _merge(tmp, target)
+        else:
+            os.replace(tmp, target)
+    except OSError as exc:
+        if isinstance(exc, OutputPathError):
+            raise
+        raise OutputPathError(f"Cannot write {label}: {exc.strerror or exc}.") from None
+    finally:
+        if tmp.exists():
+            import shutil
+
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _merge(source: Path, target: Path) -> None:
+    """Move every entry of ``source`` into ``target`` (files renamed onto theirs; folders merged)."""
+    for entry in sorted(source.iterdir()):
+        dest = target / entry.name
+        if entry.is_dir() and not entry.is_symlink():
+            if dest.is_dir() and not dest.is_symlink():
+                _merge(entry, dest)
+                continue
+            if dest.exists() or dest.is_symlink():
+                raise OutputPathError(f"Cannot publish '{dest}': it is a file where a folder goes.")
+        elif dest.is_dir() and not dest.is_symlink():
+            raise OutputPathError(f"Cannot publish '{dest}': it is a folder where a file goes.")
+        os.replace(entry, dest)

@@ -1,0 +1,191 @@
+"""Independent simulation tasks spread over worker processes, with results independent of their number.
+
+Simulated products (:mod:`fuelhm_bench.datasets.fleets`, :mod:`fuelhm_bench.datasets.doe`)
+are sums of independent pieces: every flight draws its randomness from its own
+generator (:func:`fuelhm_bench.flights.fleet.rng_for`), so a batch of flights
+gives the same bytes whichever process simulates it and whatever else that
+process simulates. :func:`run_ordered` runs such pieces on ``workers``
+processes and returns their results **in submission order**, so the
+concatenated table is byte-identical for any number of workers (tested in
+``tests/test_datasets_parallel.py``).
+
+The workers are forked from this process where the platform allows it (Linux),
+so they start with the modules already imported and the numba functions
+already compiled or loaded from the numba cache (:func:`warm_up` loads them
+first, once); elsewhere they are spawned and load both themselves. The pool
+is kept for the process's lifetime (one per number of workers) and shut down
+at exit. Inside a process that may not have children (a Dask worker, a
+daemon process) or with ``workers=1``, the pieces run in this process, in
+order.
+"""
+
+from __future__ import annotations
+
+import atexit
+import multiprocessing
+import os
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+
+from fuelhm_bench.errors import ParameterError
+
+__all__ = ["check_workers", "default_workers", "run_ordered", "submit", "warm_up"]
+
+_POOLS: dict[int, ProcessPoolExecutor] = {}
+_WARM = False
+
+
+def default_workers() -> int:
+    """Number of processes the simulation uses by default: the CPUs this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def check_workers(workers, where: str) -> int:
+    """``workers`` as an int >= 1 (None: :func:`default_workers`), or a ParameterError naming ``where``."""
+    if workers is None:
+        return default_workers()
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise ParameterError(f"The 'workers' parameter of {where} must be an integer >= 1 or None. "
+                             f"Got {workers!r} instead.")
+    return workers
+
+
+def warm_up() -> None:
+    """Load (or compile) the simulator's and the extractor's numba functions in this process, once.
+
+    A two-minute flight of one unit, simulated and reduced to indicators: every
+    compiled function the fleets use is then in memory, and forked workers
+    inherit it instead of each loading it again.
+    """
+    global _WARM
+    if _WARM:
+        return
+    from fuelhm_bench.datasets.fleets import fleet_indicators
+    from fuelhm_bench.flights.fleet import FleetConfig
+    from fuelhm_bench.flights.mission import MissionProfile
+
+    fleet_indicators(FleetConfig(n_units=1, n_flights=1, mission=MissionProfile(duration_s=120.0)), workers=1)
+    _WARM = True
+
+
+def _can_have_children() -> bool:
+    return not multiprocessing.current_process().daemon
+
+
+def _pool(workers: int) -> ProcessPoolExecutor:
+    pool = _POOLS.get(workers)
+    if pool is None:
+        if sys.platform == "linux":
+            warm_up()
+            context = multiprocessing.get_context("fork")
+        else:  # pragma: no cover - macOS and Windows start fresh interpreters
+            context = multiprocessing.get_context("spawn")
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_init)
+        _POOLS[workers] = pool
+    return pool
+
+
+def _worker_init() -> None:
+    """Workers ignore Ctrl-C: the parent handles it (one message, no partial output) and ends them."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _terminate(workers: int) -> None:
+    """End a pool now: its processes are killed (their tasks are pure; nothing is lost but work)."""
+    pool = _POOLS.pop(workers, None)
+    if pool is None:
+        return
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        try:
+            process.kill()
+        except (OSError, AttributeError):  # already gone
+            pass
+    pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _shutdown() -> None:
+    for workers in list(_POOLS):
+        _terminate(workers)
+
+
+atexit.register(_shutdown)
+
+
+def run_ordered(fn: Callable, tasks: Sequence[tuple], *, workers: int = 1, sizes: Sequence[int] | None = None,
+                progress: Callable[[int], object] | None = None) -> list:
+    """``[fn(*t) for t in tasks]``, computed on ``workers`` processes, in the order of ``tasks``.
+
+    Parameters
+    ----------
+    fn : callable
+        A module-level function (picklable); its arguments and result must pickle.
+    tasks : sequence of tuple
+        Arguments of each call.
+    workers : int, default=1
+        Processes; 1 (or a process that may not have children): this process, in order.
+    sizes : sequence of int, optional
+        What each task counts for ``progress`` (e.g. its number of flights); default 1 each.
+    progress : callable, optional
+        Called with ``sizes[i]`` as each task completes (in completion order).
+
+    Returns
+    -------
+    list
+        The results, in the order of ``tasks``.
+    """
+    sizes = [1] * len(tasks) if sizes is None else list(sizes)
+    if workers <= 1 or len(tasks) <= 1 or not _can_have_children():
+        out = []
+        for t, n in zip(tasks, sizes):
+            out.append(fn(*t))
+            if progress is not None:
+                progress(n)
+        return out
+    pool = _pool(workers)
+    futures = {pool.submit(fn, *t): i for i, t in enumerate(tasks)}
+    results: list = [None] * len(tasks)
+    pending = set(futures)
+    try:
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in finished:
+                i = futures[f]
+                results[i] = f.result()
+                if progress is not None:
+                    progress(sizes[i])
+    except BaseException as exc:
+        for f in pending:
+            f.cancel()
+        if isinstance(exc, BrokenProcessPool) or not isinstance(exc, Exception):
+            _terminate(workers)  # a worker died, or Ctrl-C: stop now; the next call starts a new pool
+        raise
+    return results
+
+
+class _Deferred:
+    """A call made when its result is asked for (what :func:`submit` returns without workers)."""
+
+    def __init__(self, fn: Callable, args: tuple) -> None:
+        self._fn, self._args = fn, args
+
+    def result(self):
+        return self._fn(*self._args)
+
+
+def submit(fn: Callable, *args, workers: int = 1):
+    """Start ``fn(*args)`` on a worker process now; returns an object whose ``result()`` waits for it.
+
+    It queues behind the pieces already submitted to the same pool (so it uses
+    a core when one frees). With ``workers=1`` (or no children allowed) the call
+    is made in this process when ``result()`` is called.
+    """
+    if workers <= 1 or not _can_have_children():
+        return _Deferred(fn, args)
+    return _pool(workers).submit(fn, *args)

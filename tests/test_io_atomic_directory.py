@@ -1,0 +1,72 @@
+"""Output folders are published only when complete (io/outputs.atomic_directory; itl, paper, discrepancy)."""
+
+from __future__ import annotations
+
+import pytest
+
+from fuelhm_bench.cli import main
+from fuelhm_bench.errors import OutputPathError
+from fuelhm_bench.io.outputs import atomic_directory
+
+
+def test_new_directory_appears_only_on_success(tmp_path):
+    out = tmp_path / "out"
+    with atomic_directory(out) as tmp:
+        (tmp / "a.txt").write_text("a")
+        (tmp / "sub").mkdir()
+        (tmp / "sub" / "b.csv").write_text("b")
+        assert not out.exists()
+    assert (out / "a.txt").read_text() == "a" and (out / "sub" / "b.csv").read_text() == "b"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no temporary folder left
+
+
+@pytest.mark.parametrize("error", [KeyboardInterrupt, RuntimeError])
+def test_interrupted_run_publishes_nothing_and_keeps_the_old_content(tmp_path, error):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a.txt").write_text("old")
+    with pytest.raises(error):
+        with atomic_directory(out) as tmp:
+            (tmp / "a.txt").write_text("new")
+            (tmp / "b.txt").write_text("new")
+            raise error()
+    assert sorted(p.name for p in out.iterdir()) == ["a.txt"] and (out / "a.txt").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    with pytest.raises(error):  # a new folder is not even created
+        with atomic_directory(tmp_path / "new") as tmp:
+            (tmp / "a.txt").write_text("new")
+            raise error()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_existing_directory_keeps_other_files_and_refuses_without_force(tmp_path):
+    out = tmp_path / "out"
+    (out / "sub").mkdir(parents=True)
+    (out / "mine.txt").write_text("mine")
+    (out / "sub" / "old.csv").write_text("old")
+    (out / "a.txt").write_text("old")
+    with atomic_directory(out) as tmp:
+        (tmp / "a.txt").write_text("new")
+        (tmp / "sub").mkdir()
+        (tmp / "sub" / "new.csv").write_text("new")
+    assert (out / "mine.txt").read_text() == "mine" and (out / "a.txt").read_text() == "new"
+    assert sorted(p.name for p in (out / "sub").iterdir()) == ["new.csv", "old.csv"]
+    with pytest.raises(OutputPathError, match="already holds a.txt; refusing to overwrite"):
+        with atomic_directory(out, force=False, names=("a.txt",)):
+            pass
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(OutputPathError, match="is a file, not a directory"):
+        with atomic_directory(blocker / "out"):
+            pass
+
+
+def test_itl_is_refused_above_the_run_budget_before_any_output(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("FUELHM_RUN_BUDGET_FLIGHT_HOURS", "10")
+    out = tmp_path / "itl"
+    assert main(["itl", "--units", "100", "--minutes", "30", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--units 100 x 29 cases (healthy + 7 modes x 4 intensities) + --healthy-units 8 x --healthy-flights 5 = " \
+           "2940 flights of 30 min is 1470 flight-hours" in err
+    assert "above the run budget of 10 flight-hours" in err and "FUELHM_RUN_BUDGET_FLIGHT_HOURS=1470" in err
+    assert not out.exists()
