@@ -190,7 +190,9 @@ class _Child:
     def op_check(self, p: dict) -> None:
         from fuelhm_bench.methods.checks import _run_one_check
 
-        self.reply(**_run_one_check(self.method, p["name"], p["data"]))
+        if p["data"] is not None:  # sent with the first check, kept for the next ones
+            self._check_data = p["data"]
+        self.reply(**_run_one_check(self.method, p["name"], self._check_data))
 
     # ------------------------------------------------------------------ loop
     def serve(self) -> None:
