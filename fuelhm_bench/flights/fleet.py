@@ -133,7 +133,8 @@ def build_units(config: FleetConfig) -> list[Unit]:
     return units
 
 
-def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None) -> Iterator[list[SimulatedFlight]]:
+def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None,
+                 units=None) -> Iterator[list[SimulatedFlight]]:
     """Simulate the fleet in batches of flights (bounded memory).
 
     Parameters
@@ -143,13 +144,18 @@ def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None) ->
         Flights simulated together.
     progress : callable, optional
         Called with the number of flights done after each batch.
+    units : sequence of int, optional
+        Simulate only these units of the fleet (the same flights, bit for bit,
+        as in the whole fleet: every draw is seeded per unit and flight); None: all.
 
     Yields
     ------
     list of SimulatedFlight
     """
-    units = build_units(config)
-    todo = [(u, f) for u in units for f in range(config.n_flights)]
+    fleet = build_units(config)
+    if units is not None:
+        fleet = [fleet[int(u)] for u in units]
+    todo = [(u, f) for u in fleet for f in range(config.n_flights)]
     for start in range(0, len(todo), batch_size):
         chunk = todo[start:start + batch_size]
         models, inputs, rngs, labels, intens = [], [], [], [], []
