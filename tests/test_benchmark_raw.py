@@ -130,3 +130,33 @@ def test_check_method_catches_a_raw_method_that_ignores_its_flights():
     check_method(SampleCounter(), sealed=False)
     with pytest.raises(MethodError, match="check_raw_used failed for IgnoresRaw: .*does not use the raw"):
         check_method(IgnoresRaw(), sealed=False)
+
+
+def _docs_section() -> str:
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "methods.md").read_text()
+    start = text.index("## 4b. Methods on the raw signals")
+    return text[start:text.index("\n## ", start + 3)]
+
+
+def test_docs_raw_recipe_runs_sealed_to_a_score(evaluation, tmp_path, monkeypatch):
+    """The few-line recipe of docs/methods.md section 4b, from an empty file to a scored outcome."""
+    import re
+    import sys
+
+    from fuelhm_bench.methods.loading import load_method
+
+    section = _docs_section()
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    assert len(code.strip().splitlines()) <= 20
+    command = re.search(r"```bash\n(.*?)```", section, re.S).group(1)
+    entry = re.search(r"--method (\S+)", command).group(1)
+    assert entry == "my_raw:TrackingError" and "--fidelity physics" in command
+    (tmp_path / "my_raw.py").write_text(code)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "my_raw", raising=False)
+    check_method(load_method(entry, {}), sealed=False)
+    outcome = run_in_env(entry, evaluation)
+    assert outcome.status == "ok", outcome.message
+    assert np.isfinite(outcome.kpis()["summary_score"])
