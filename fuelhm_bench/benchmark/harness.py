@@ -10,7 +10,13 @@ scheduled as in the paper's KPIs), and for every flight
    ``flight_id``, ``unit_id``, ``flight_index``, the ten indicators with NaN
    for invalid ones, ``<name>_valid``) - the only thing the method sees;
 2. ``method.decide(row)`` gives a :class:`~fuelhm_bench.methods.Decision`,
-   checked (:func:`~fuelhm_bench.methods.decision_problem`) and recorded;
+   checked (:func:`~fuelhm_bench.methods.decision_problem`) and recorded; a
+   method that declares ``needs_raw`` also gets the flight's full-rate
+   samples, ``decide(row, raw=RawFlight)``, from the environment's
+   ``info["raw_flight"]`` (``reset(options={"raw_flight": True})``), and is
+   fitted and calibrated on the raw training flights
+   (:mod:`fuelhm_bench.benchmark.raw_flights`); at the surrogate fidelity, which
+   has no flights, it is refused (status ``"refused"``);
 3. the decision becomes the action (:func:`action_from_decision`) and the
    environment flies the next flight.
 
