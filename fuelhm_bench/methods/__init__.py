@@ -33,6 +33,6 @@ from fuelhm_bench.methods.trivial import NullMethod, RandomMethod
 __all__ = [
     "BaseMethod", "CheckData", "DECISION_COLUMNS", "Decision", "GUILT_COLUMNS", "ITL_COLUMNS",
     "Knowledge", "MethodCheck", "NullMethod", "RandomMethod", "check_method", "clone_method",
-    "decision_problem", "has_batch_path", "iter_checks", "method_needs_raw", "make_check_data", "normalize_guilt",
-    "parametrize_with_checks", "run_table", "run_unit",
+    "decision_problem", "has_batch_path", "iter_checks", "make_check_data", "method_needs_raw",
+    "normalize_guilt", "parametrize_with_checks", "run_table", "run_unit",
 ]
