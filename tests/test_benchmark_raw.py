@@ -160,3 +160,25 @@ def test_docs_raw_recipe_runs_sealed_to_a_score(evaluation, tmp_path, monkeypatc
     outcome = run_in_env(entry, evaluation)
     assert outcome.status == "ok", outcome.message
     assert np.isfinite(outcome.kpis()["summary_score"])
+
+
+def test_a_method_built_here_may_import_an_editable_package(tmp_path, monkeypatch):
+    """A class defined outside any package, subclassing a baseline, runs sealed (its imports are readable)."""
+    import sys
+
+    from fuelhm_bench.methods.sandbox import SealedMethod
+
+    (tmp_path / "my_forest.py").write_text(
+        "from fuelhm_baselines.raw_tracking import RawTrackingMethod\n\n"
+        "class MyTracking(RawTrackingMethod):\n    pass\n")
+    import os
+
+    # the source folder of the editable install is not on the path (run from elsewhere, as a user would)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if not os.path.isdir(os.path.join(p or ".", "baselines"))])
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "my_forest", raising=False)
+    from my_forest import MyTracking
+
+    with SealedMethod(MyTracking(random_state=0)) as sealed:
+        assert sealed.needs_raw

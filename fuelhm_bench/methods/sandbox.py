@@ -174,6 +174,21 @@ def source_hash(entry_point: str) -> str:
     return hashlib.sha256(origin.read_bytes()).hexdigest()
 
 
+def _imported_roots() -> list[str]:
+    """Roots of the top-level packages imported in this process (editable installs live outside sys.path).
+
+    A method instance built here (a notebook, a script) may import packages that an editable install
+    serves through an import hook from a source folder: the sealed process must be able to read them.
+    """
+    roots = []
+    for name, module in list(sys.modules.items()):
+        origin = getattr(module, "__file__", None) if "." not in name else None
+        if origin:
+            p = Path(origin)
+            roots.append(str(p.parent if p.name == "__init__.py" else p))
+    return roots
+
+
 def _python_roots() -> list[str]:
     roots = {sys.prefix, sys.base_prefix, sys.exec_prefix, sys.base_exec_prefix,
              str(Path(sys.executable).resolve().parent)}
@@ -303,6 +318,8 @@ class SealedMethod:
             if root is not None:
                 readable.append(str(root))
         readable += [p for p in path if os.path.isdir(p) and not any(self._contains(p, d) for d in self.deny)]
+        if not isinstance(self.method, str):  # an instance: the packages its module needed are imported here
+            readable += [r for r in _imported_roots() if not any(self._contains(d, r) for d in self.deny)]
         readable = [p for p in dict.fromkeys(readable) if not any(self._contains(p, d) for d in self.deny)]
         method = self.method
         if not isinstance(method, str):  # by value when its class is not importable (a notebook, a script)
