@@ -127,7 +127,10 @@ class IgnoresRaw(SampleCounter):
 
 
 def test_check_method_catches_a_raw_method_that_ignores_its_flights():
+    from fuelhm_baselines.raw_tracking import RawTrackingMethod
+
     check_method(SampleCounter(), sealed=False)
+    check_method(RawTrackingMethod(random_state=0), sealed=False)
     with pytest.raises(MethodError, match="check_raw_used failed for IgnoresRaw: .*does not use the raw"):
         check_method(IgnoresRaw(), sealed=False)
 
