@@ -13,7 +13,7 @@ from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.envs.actuation_loop import RAW_FLIGHT_SIGNALS, ActuationLoopEnv
 from fuelhm_bench.errors import MethodError, ParameterError
 from fuelhm_bench.indicators import extract_indicators
-from fuelhm_bench.methods import BaseMethod, Decision, check_method
+from fuelhm_bench.methods import BaseMethod, Decision, NullMethod, check_method, iter_checks, make_check_data
 from fuelhm_bench.scenarios import load_scenario
 from fuelhm_bench.taxonomy import INDICATOR_NAMES
 
@@ -78,6 +78,7 @@ def test_raw_method_runs_sealed_with_full_rate_flights(evaluation):
     assert len(outcome.healthy_scores) == len(evaluation.calibration_indicators)
 
 
+@pytest.mark.slow  # the sealed raw path runs in the default run through the docs recipe below
 def test_raw_baseline_scores_through_the_sealed_harness(evaluation):
     outcome = run_in_env(RAW_ENTRY, evaluation)
     assert outcome.status == "ok", outcome.message
@@ -126,13 +127,17 @@ class IgnoresRaw(SampleCounter):
         return Decision.no_alarm(float(np.nan_to_num(row["X1"])))
 
 
-def test_check_method_catches_a_raw_method_that_ignores_its_flights():
+def test_check_method_passes_the_raw_baseline_and_catches_a_method_ignoring_its_flights():
     from fuelhm_baselines.raw_tracking import RawTrackingMethod
 
-    check_method(SampleCounter(), sealed=False)
     check_method(RawTrackingMethod(random_state=0), sealed=False)
+    data = make_check_data(0, raw=True)
+    raw_used = {type(m).__name__: next(c for c in iter_checks(m, data=data) if c.name == "check_raw_used")
+                for m in (SampleCounter(), IgnoresRaw())}
+    raw_used["SampleCounter"]()
     with pytest.raises(MethodError, match="check_raw_used failed for IgnoresRaw: .*does not use the raw"):
-        check_method(IgnoresRaw(), sealed=False)
+        raw_used["IgnoresRaw"]()
+    assert "check_raw_used" not in [c.name for c in iter_checks(NullMethod())]  # only for raw methods
 
 
 def _docs_section() -> str:
