@@ -68,3 +68,37 @@ def test_batch_against_rows(benchmark, name, make, batch_cls, row_cls):
           f"({row_s / batch_s:.1f}x); check_method batch {checks['batch']:.1f} s, "
           f"row by row {checks['row']:.1f} s")
     assert row_s > batch_s
+
+
+def _cpu_s() -> float:
+    """CPU time of this process and of its finished children (the sealed process) [s]."""
+    import resource
+
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+@pytest.mark.benchmark(group="check_method")
+@pytest.mark.parametrize("name, make, batch_cls, row_cls", _makers(), ids=lambda v: v if isinstance(v, str) else "")
+def test_check_method_cpu(benchmark, monkeypatch, name, make, batch_cls, row_cls):
+    """CPU time of check_method at its default size: sealed, in process, and in process without the
+    shared fit and single-batch runs (the checks as they were before), side by side in one run."""
+    from fuelhm_bench.methods import checks
+
+    check_method(make(batch_cls), sealed=False)  # warm-up: imports, JIT compilation
+    cpu = {}
+    with monkeypatch.context() as m:
+        fresh = checks._fresh
+        m.setattr(checks, "_fresh", lambda method, data, seed=0, shared=True: fresh(method, data, seed, shared=False))
+        m.setattr(checks, "_run_units", lambda method, data: run_table(method, data.units))
+        c = _cpu_s()
+        check_method(make(batch_cls), sealed=False)
+        cpu["in_process_unshared"] = _cpu_s() - c
+    for label, sealed in (("in_process", False), ("sealed", True)):
+        c = _cpu_s()
+        check_method(make(batch_cls), sealed=sealed)
+        cpu[label] = _cpu_s() - c
+    benchmark.pedantic(check_method, args=(make(batch_cls),), kwargs={"sealed": False}, rounds=1, iterations=1)
+    benchmark.extra_info.update({f"cpu_{k}_s": v for k, v in cpu.items()})
+    print(f"\n{name}: check_method CPU sealed {cpu['sealed']:.2f} s, in process {cpu['in_process']:.2f} s, "
+          f"in process without shared fit / single batch {cpu['in_process_unshared']:.2f} s")

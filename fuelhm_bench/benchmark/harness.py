@@ -10,7 +10,13 @@ scheduled as in the paper's KPIs), and for every flight
    ``flight_id``, ``unit_id``, ``flight_index``, the ten indicators with NaN
    for invalid ones, ``<name>_valid``) - the only thing the method sees;
 2. ``method.decide(row)`` gives a :class:`~fuelhm_bench.methods.Decision`,
-   checked (:func:`~fuelhm_bench.methods.decision_problem`) and recorded;
+   checked (:func:`~fuelhm_bench.methods.decision_problem`) and recorded; a
+   method that declares ``needs_raw`` also gets the flight's full-rate
+   samples, ``decide(row, raw=RawFlight)``, from the environment's
+   ``info["raw_flight"]`` (``reset(options={"raw_flight": True})``), and is
+   fitted and calibrated on the raw training flights
+   (:mod:`fuelhm_bench.benchmark.raw_flights`); at the surrogate fidelity, which
+   has no flights, it is refused (status ``"refused"``);
 3. the decision becomes the action (:func:`action_from_decision`) and the
    environment flies the next flight.
 
@@ -285,9 +291,11 @@ class Outcome:
     ----------
     method : str
         The method's name (entry point, or class name of an instance).
-    status : {"ok", "error", "crash", "timeout", "cpu_limit", "memory", "invalid"}
+    status : {"ok", "error", "crash", "timeout", "cpu_limit", "memory", "invalid", "refused"}
         ``"error"``: the method raised (or the environment failed, said in the
-        message); ``"crash"``: its process died (``os._exit``, a signal);
+        message); ``"refused"``: the method cannot run at this fidelity (a
+        method with ``needs_raw`` at the surrogate fidelity, which has no
+        flights); ``"crash"``: its process died (``os._exit``, a signal);
         ``"timeout"``, ``"cpu_limit"``, ``"memory"``: it hit a limit;
         ``"invalid"``: it broke the Decision contract or returned unusable output.
     message : str
@@ -398,7 +406,37 @@ def _env_call(fn, *args, **kwargs):
         raise _EnvFailure(f"{type(exc).__name__}: {exc}") from exc
 
 
-def _episodes(sealed, evaluation: EnvEvaluation, progress) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+def _training_raw(evaluation: EnvEvaluation, table: pd.DataFrame):
+    """The raw flights of the rows of a training table, in the table's unit order (one at a time)."""
+    from fuelhm_bench.benchmark.raw_flights import training_raw_flights
+
+    return training_raw_flights(evaluation.scenario, list(dict.fromkeys(table["unit_id"].tolist())),
+                                flight_minutes=evaluation.env.flight_minutes)
+
+
+def _raw_calibration_scores(sealed, evaluation: EnvEvaluation) -> np.ndarray:
+    """Healthy calibration scores of a raw method: unit by unit, each row with its flight's samples."""
+    table = evaluation.calibration_indicators
+    order = table.assign(_u=pd.factorize(table["unit_id"])[0]).sort_values(["_u", "flight_index"], kind="stable")
+    flights = _training_raw(evaluation, table)
+    scores, unit = [], None
+    for i in range(len(order)):
+        row = order.iloc[i].drop("_u")
+        flight = next(flights)
+        if (flight.unit_id, flight.flight_index) != (row["unit_id"], int(row["flight_index"])):
+            raise _EnvFailure(f"the raw training flight of unit {flight.unit_id}, flight {flight.flight_index} "
+                              f"does not match the table row (unit {row['unit_id']}, flight {row['flight_index']})")
+        if row["unit_id"] != unit:
+            unit = row["unit_id"]
+            sealed.start_unit(unit)
+        scores.append(sealed.decide(row, raw=flight, where=f"calibration scores (unit {unit}, flight "
+                                                          f"{row['flight_index']})").score)
+    return np.asarray(scores, dtype=np.float64)
+
+
+def _episodes(sealed, evaluation: EnvEvaluation, progress, raw: bool = False
+              ) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    from fuelhm_bench.benchmark.raw_flights import raw_flight_from_info
     from fuelhm_bench.methods.tables import DECISION_COLUMNS
 
     env = evaluation.env
@@ -406,12 +444,17 @@ def _episodes(sealed, evaluation: EnvEvaluation, progress) -> tuple[pd.DataFrame
     unit_col, flight_col, scores, alarms, guilts = [], [], [], [], []
     labels, episodes = [], []
     for k in evaluation.units:
-        obs, info = _env_call(env.reset, options={"unit": k})
+        obs, info = _env_call(env.reset, options={"unit": k, "raw_flight": True} if raw else {"unit": k})
         sealed.start_unit(k)
         total, terminated = 0.0, False
         for f in range(n):
             row = observation_row(obs, k, f, k * n + f)
-            decision = sealed.decide(row, where=f"decide (unit {k}, flight {f})")
+            flight = None
+            if raw:
+                flight = _env_call(raw_flight_from_info, info["raw_flight"], k, f)
+                info = None  # the flight is now held once, by ``flight``
+            decision = sealed.decide(row, raw=flight, where=f"decide (unit {k}, flight {f})")
+            flight = None
             unit_col.append(k)
             flight_col.append(f)
             scores.append(decision.score)
@@ -490,13 +533,22 @@ def run_in_env(method, evaluation: EnvEvaluation, *, random_state: int = 0, time
     fit_s = decide_s = float("nan")
     try:
         info = sealed.start()
+        raw = sealed.needs_raw
+        if raw and evaluation.fidelity != "physics":
+            return Outcome(name, "refused", f"{name} needs the raw flights (needs_raw = True), which the "
+                                            f"{evaluation.fidelity} fidelity does not have (it draws indicators, "
+                                            f"not flights): run it at fidelity 'physics'.",
+                           seconds=time.perf_counter() - t0, params=info.get("params", {}),
+                           sandbox=sealed.sandbox, **meta)
         t_fit = sealed.fit(evaluation.fit_indicators,
                            knowledge=evaluation.method_knowledge if knowledge is None else knowledge,
-                           random_state=random_state)
+                           random_state=random_state,
+                           raw_flights=_training_raw(evaluation, evaluation.fit_indicators) if raw else None)
         fit_s = float(t_fit.get("wall_s", float("nan")))
         t1 = time.perf_counter()
-        healthy = sealed.scores(evaluation.calibration_indicators)
-        decisions, labels, episodes = _episodes(sealed, evaluation, progress)
+        healthy = (_raw_calibration_scores(sealed, evaluation) if raw
+                   else sealed.scores(evaluation.calibration_indicators))
+        decisions, labels, episodes = _episodes(sealed, evaluation, progress, raw=raw)
         decide_s = time.perf_counter() - t1
     except SealedFailure as exc:
         return Outcome(name, exc.status, exc.message, seconds=time.perf_counter() - t0, fit_seconds=fit_s,
@@ -558,7 +610,21 @@ def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None 
     -------
     Outcome
         Call ``.kpis()`` or ``.score()`` on it.
+
+    Raises
+    ------
+    ParameterError
+        For a method with ``needs_raw`` at the surrogate fidelity (no flights to give it).
     """
+    from fuelhm_bench.methods.base import method_needs_raw
+
+    if not isinstance(method, str) and method_needs_raw(method):  # refuse before building anything
+        from fuelhm_bench.datasets.cache import resolve_scenario
+
+        if (fidelity or resolve_scenario(scenario).fidelity) != "physics":
+            raise ParameterError(f"{type(method).__name__} needs the raw flights (needs_raw = True), which the "
+                                 f"surrogate fidelity does not have (it draws indicators, not flights): "
+                                 f"evaluate it with fidelity='physics'.")
     if progress is not None:
         with progress(0, "published knowledge") as bar:
             def grow(k: int) -> None:
@@ -570,9 +636,16 @@ def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None 
                                             cache_dir=cache_dir, progress=grow)
         with progress(evaluation.n_flights, f"{method if isinstance(method, str) else type(method).__name__} on "
                                             f"{evaluation.scenario.id}") as bar:
-            return run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s, limits=limits,
-                              progress=bar.update)
+            return _refusal_raised(run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s,
+                                              limits=limits, progress=bar.update))
     evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
                                     flight_minutes=flight_minutes, knowledge_size=knowledge_size,
                                     cache_dir=cache_dir)
-    return run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s, limits=limits)
+    return _refusal_raised(run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s,
+                                      limits=limits))
+
+
+def _refusal_raised(outcome: Outcome) -> Outcome:
+    if outcome.status == "refused":
+        raise ParameterError(outcome.message)
+    return outcome

@@ -128,8 +128,7 @@ def leaderboard_html(results: pd.DataFrame, *, value: str = "summary_score",
     str
         A complete HTML document.
     """
-    from fuelhm_bench.scoring.ranking import (cd_diagram, critical_difference, friedman_test,
-                                              mean_ranks)
+    from fuelhm_bench.scoring.ranking import aggregate_ranking, cd_diagram
 
     frame = results.copy()
     if "status" not in frame.columns:
@@ -144,22 +143,14 @@ def leaderboard_html(results: pd.DataFrame, *, value: str = "summary_score",
             f"<p>Ranked by <b>{html.escape(value)}</b> (null method = 0, perfect = 100). Brackets: "
             f"95 % confidence intervals resampling units. Click a column header to sort.</p>"]
 
-    ok = frame[(frame["status"] == "ok") & frame.get(value, pd.Series(dtype=float)).notna()] \
-        if value in frame.columns else frame.iloc[0:0]
     body.append("<h2>Aggregate over scenarios and seeds</h2>")
-    if ok["method"].nunique() >= 2 if len(ok) else False:
-        method_key = ok["method"] + ok["params"].fillna("").map(
-            lambda p: f" {p}" if p else "") if "params" in ok.columns else ok["method"]
-        agg_in = ok.assign(method=method_key)
-        ranks = mean_ranks(agg_in, value=value)
-        fr = friedman_test(agg_in, value=value)
-        k, n = len(ranks), int(ranks["n_blocks"].iloc[0]) if len(ranks) else 0
-        agg = ranks.copy()
-        means = agg_in.groupby("method")[value].mean()
-        agg[f"mean_{value}"] = agg["method"].map(means)
-        body.append(_table(agg, "aggregate", out_dir))
+    agg = aggregate_ranking(frame, value=value, alpha=alpha) \
+        if value in frame.columns and "method" in frame.columns else None
+    if agg is not None and len(agg.table) >= 2:  # the one aggregate of every view (scoring.ranking)
+        ranks, fr, cd = agg.table, agg.friedman, agg.critical_difference
+        k, n = len(ranks), fr["n_blocks"]
+        body.append(_table(ranks[["method", "mean_rank", "n_blocks", f"mean_{value}"]], "aggregate", out_dir))
         if n >= 1 and k >= 2:
-            cd = critical_difference(k, n, alpha)
             if fr["pvalue"] == fr["pvalue"]:
                 body.append(f"<p>Friedman test over {n} blocks and {k} methods: chi2 = "
                             f"{fr['statistic']:.3g}, p = {fr['pvalue']:.3g}. Nemenyi critical "

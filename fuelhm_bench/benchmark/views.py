@@ -1,5 +1,10 @@
 """Views of the results store: ``leaderboard.csv`` / ``leaderboard.md``, per-scenario and per-method reports.
 
+``leaderboard.md`` opens with the aggregate over scenarios and seeds (mean rank per entry, the Friedman
+test, the Nemenyi critical difference and Wilcoxon-Holm against the best entry:
+:func:`fuelhm_bench.scoring.ranking.aggregate_ranking`), also written as ``aggregate.csv`` (one row per
+entry; the test statistics repeated on every row) and ``aggregate_pairs.csv`` (every Wilcoxon-Holm pair).
+
 Every file here is generated from :class:`~fuelhm_bench.benchmark.store.ResultStore`
 rows and tables, never from a run in memory, so a resumed run, a distributed
 run and a local run write the same views. Per-method folders are named
@@ -16,7 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
-__all__ = ["board_table", "method_folder", "slug", "write_views"]
+__all__ = ["aggregate_view", "board_table", "method_folder", "slug", "write_views"]
 
 _MD_COLUMNS = ("scenario", "seed", "method", "params", "status", "summary_score", "summary_score_ci_low",
                "summary_score_ci_high", "fpr_standard_thr", "fnr_standard_thr", "fcr", "brier",
@@ -60,6 +65,39 @@ def board_table(store, tasks) -> pd.DataFrame:
     return board
 
 
+def aggregate_view(board: pd.DataFrame, *, value: str = "summary_score", alpha: float = 0.05):
+    """The aggregate of a board (:func:`board_table`) and its CSV form.
+
+    Returns
+    -------
+    aggregate : Aggregate
+        :func:`fuelhm_bench.scoring.ranking.aggregate_ranking` of the board's ok entries.
+    csv : pandas.DataFrame
+        ``aggregate.table`` plus ``friedman_statistic``, ``friedman_pvalue``, ``critical_difference``,
+        ``n_methods``, ``alpha`` on every row.
+    """
+    from fuelhm_bench.scoring.ranking import aggregate_ranking
+
+    frame = board if value in board.columns else board.assign(**{value: float("nan")})
+    if "method" not in frame.columns:
+        frame = frame.assign(method=pd.Series(dtype=object))
+    agg = aggregate_ranking(frame, value=value, alpha=alpha)
+    csv = agg.table.assign(friedman_statistic=agg.friedman["statistic"], friedman_pvalue=agg.friedman["pvalue"],
+                           critical_difference=agg.critical_difference, n_methods=agg.friedman["n_methods"],
+                           alpha=alpha)
+    return agg, csv
+
+
+def _aggregate_markdown(agg, to_markdown) -> str:
+    lines = ["## Aggregate over scenarios and seeds", "",
+             f"Entries ranked inside every block (scenario x seed) by {agg.value}; a block enters when every "
+             f"entry has a result in it (Demšar 2006; docs/scoring.md).", ""]
+    if len(agg.table):
+        lines += [to_markdown(agg.table.round(4), float_format=".4g"), ""]
+    lines += [agg.summary(), ""]
+    return "\n".join(lines)
+
+
 def write_views(store, out, tasks) -> pd.DataFrame:
     """Write every view of ``tasks`` from ``store`` into ``out``; returns the board (see :func:`board_table`)."""
     from fuelhm_bench.scoring import to_markdown
@@ -75,6 +113,9 @@ def write_views(store, out, tasks) -> pd.DataFrame:
         _scenario_report(out / f"{scenario}-seed{seed}", scenario, seed, group)
     csv = board.drop(columns=["method_params"], errors="ignore")
     csv.to_csv(out / "leaderboard.csv", index=False)
+    agg, agg_csv = aggregate_view(board)
+    agg_csv.to_csv(out / "aggregate.csv", index=False)
+    agg.pairs.to_csv(out / "aggregate_pairs.csv", index=False)
     cols = [c for c in _MD_COLUMNS if c in board]
     view = board[cols].copy() if len(board) else pd.DataFrame(columns=cols)
     if "message" in view:
@@ -82,6 +123,7 @@ def write_views(store, out, tasks) -> pd.DataFrame:
     (out / "leaderboard.md").write_text(
         "# Leaderboard\n\nRanked by summary score (null method = 0, perfect = 100; docs/scoring.md). "
         "Generated from the results store; `params` are the entry's hyperparameters.\n\n"
+        + _aggregate_markdown(agg, to_markdown) + "\n## Entries\n\n"
         + to_markdown(view.round(3), float_format=".4g") + "\n")
     from fuelhm_bench.benchmark.page import write_leaderboard_page
 

@@ -58,7 +58,11 @@ _XHIGH = np.array([EXTENDED_INDICATOR_BOUNDS[n][1] for n in EXTENDED_INDICATOR_N
 _N_EXT = len(EXTENDED_INDICATOR_NAMES)
 _ARGUMENTS = ("scenario", "fidelity", "maintenance", "drifted", "flight_minutes", "raw", "raw_samples",
               "knowledge", "knowledge_size", "cache_dir", "render_mode")
-_OPTIONS = ("unit", "evaluation")
+_OPTIONS = ("unit", "evaluation", "raw_flight")
+
+#: Signals of the full-rate flight in ``info["raw_flight"]`` (reset option ``raw_flight``): name -> unit.
+RAW_FLIGHT_SIGNALS: dict[str, str] = {"time_s": "s", "current_mA": "mA", "position_mm": "mm",
+                                      "demand_mm": "mm", "n2_pct": "%"}
 
 
 def _observation_arrays(rows) -> dict[str, np.ndarray]:
@@ -176,6 +180,22 @@ class ActuationLoopEnv(gym.Env):
     instants from the first to the last sample: row 0 the control current [mA]
     in [-50, 50], row 1 the LVDT position [mm] in [-20, 80]. The ground truth
     (intensities, onsets) is never part of the observation.
+
+    ## Raw flights
+
+    ``reset(options={"raw_flight": True})`` (physics only) adds to the ``info``
+    of ``reset`` and of every non-final ``step`` the full-rate samples of the
+    flight in the observation: ``info["raw_flight"]``, a dict of 1-D float64
+    arrays of equal length (:data:`RAW_FLIGHT_SIGNALS`: ``time_s`` [s],
+    ``current_mA`` [mA], ``position_mm`` [mm, LVDT], ``demand_mm`` [mm],
+    ``n2_pct`` [%]), every recorded sample (150,000 for a 25-minute flight),
+    no cap and no resampling. It travels in ``info`` rather than in the
+    observation because its length varies from flight to flight and a
+    ``Box`` must have a fixed shape (``check_env`` accepts any ``info``; the
+    ``raw=True`` argument keeps a fixed-size resampled view in the observation
+    for agents that need one). With replayed units (:meth:`load_replays`) the
+    indicators are the replayed ones and the samples are the same flight flown
+    again from its seeds. One flight is held at a time.
 
     ## Rewards
 
@@ -390,6 +410,7 @@ class ActuationLoopEnv(gym.Env):
         self.action_space = spaces.Dict({"alarm": spaces.Discrete(2),
                                          "guilt": spaces.Box(0.0, 1.0, (_N_MODES,), np.float32)})
         self._t = -1  # no episode yet
+        self._raw_flight = False
         self._replays: dict[int, dict[str, np.ndarray]] = {}
 
     def load_replays(self, table) -> None:
@@ -413,7 +434,7 @@ class ActuationLoopEnv(gym.Env):
             Not the physics fidelity, maintenance on, raw observations on, a missing
             indicator column, or a unit's flights incomplete.
         """
-        if self.fidelity != "physics" or self.maintenance or self.raw:
+        if self.fidelity != "physics" or self.maintenance or self.raw:  # (the raw_flight option is fine)
             raise ParameterError(f"{type(self).__name__}.load_replays needs fidelity='physics', maintenance=False "
                                  f"and raw=False (replayed flights must not depend on the actions). Got "
                                  f"fidelity={self.fidelity!r}, maintenance={self.maintenance}, raw={self.raw}.")
@@ -447,7 +468,10 @@ class ActuationLoopEnv(gym.Env):
             Seeds ``self.np_random`` (the only source of randomness of drawn units).
         options : dict or None, default=None
             ``"unit"``: int, replay that unit of the scored fleet;
-            ``"evaluation"``: bool, add the ground truth to every ``info``.
+            ``"evaluation"``: bool, add the ground truth to every ``info``;
+            ``"raw_flight"``: bool, add the full-rate samples of the observed
+            flight to ``info["raw_flight"]`` for the whole episode (physics only;
+            see Raw flights).
 
         Returns
         -------
@@ -465,6 +489,14 @@ class ActuationLoopEnv(gym.Env):
             raise ParameterError(f"The 'evaluation' option of {type(self).__name__}.reset must be a bool. "
                                  f"Got {evaluation!r} instead.")
         self._evaluation = bool(evaluation)
+        raw_flight = options.get("raw_flight", False)
+        if not isinstance(raw_flight, (bool, np.bool_)):
+            raise ParameterError(f"The 'raw_flight' option of {type(self).__name__}.reset must be a bool. "
+                                 f"Got {raw_flight!r} instead.")
+        if raw_flight and self.fidelity != "physics":
+            raise ParameterError(f"The 'raw_flight' option of {type(self).__name__}.reset needs fidelity='physics' "
+                                 f"(the surrogate draws indicators, not flights). Got fidelity={self.fidelity!r}.")
+        self._raw_flight = bool(raw_flight)
         unit = options.get("unit")
         config = self._config
         n = self.n_flights
@@ -509,6 +541,8 @@ class ActuationLoopEnv(gym.Env):
         self._t = 0
         obs = self._observe(0)
         info = {"flight_index": 0, "unit": self._unit_id}
+        if self._raw_flight:
+            info["raw_flight"] = self._raw_payload
         if self._evaluation:
             info["truth"] = self._flight_truth(0)
         return obs, info
@@ -522,13 +556,14 @@ class ActuationLoopEnv(gym.Env):
         replay = self._replays.get(self._unit_id) if self._unit_id >= 0 else None
         if replay is not None:
             self._last = {k: v[t] for k, v in replay.items()}
+            if self._raw_flight:  # the replayed indicators, the same flight's samples flown again
+                self._raw_payload = self._raw_of(*self._simulate(t))
         else:
             self._last = self._fly(t)
         return {k: v.copy() for k, v in self._last.items()}
 
-    def _fly(self, t: int) -> dict:
-        from fuelhm_bench.indicators import extract_indicators
-        from fuelhm_bench.indicators.result import IndicatorResult
+    def _simulate(self, t: int):
+        """Simulate flight ``t`` of the current unit: ``(SimOutput, FlightInputs)``."""
         from fuelhm_bench.physics.simulate import simulate
 
         active = self._active
@@ -539,7 +574,25 @@ class ActuationLoopEnv(gym.Env):
         inputs = self._config.mission.sample(mission_rng(self._seed, self._slot, t))
         noise = noise_rng(self._seed, self._slot, t)
         where = f"unit {self._unit_id}, flight {t}" if self._unit_id >= 0 else f"drawn unit, flight {t}"
-        out = simulate([model], [inputs], [noise], labels=[where])[0]
+        return simulate([model], [inputs], [noise], labels=[where])[0], inputs
+
+    @staticmethod
+    def _raw_of(out, inputs) -> dict:
+        """The full-rate payload of ``info["raw_flight"]`` (:data:`RAW_FLIGHT_SIGNALS`, float64, no cap)."""
+        n = out.time_s.size
+        extras = inputs.extras
+        return {"time_s": np.asarray(out.time_s, dtype=np.float64),
+                "current_mA": out.current_a * 1e3, "position_mm": out.measured_position_m * 1e3,
+                "demand_mm": np.asarray(extras.get("demand_mm", np.full(n, np.nan)), dtype=np.float64),
+                "n2_pct": np.asarray(extras.get("n2_pct", np.full(n, np.nan)), dtype=np.float64)}
+
+    def _fly(self, t: int) -> dict:
+        from fuelhm_bench.indicators import extract_indicators
+        from fuelhm_bench.indicators.result import IndicatorResult
+
+        out, inputs = self._simulate(t)
+        if self._raw_flight:
+            self._raw_payload = self._raw_of(out, inputs)
         current_ma = out.current_a * 1e3
         position_mm = out.measured_position_m * 1e3
         try:
@@ -686,6 +739,8 @@ class ActuationLoopEnv(gym.Env):
             self._t = t
             obs = self._observe(t)
             info = {"flight_index": t}
+            if self._raw_flight:
+                info["raw_flight"] = self._raw_payload
             terminated = False
         if self._evaluation:
             info["cost_kusd"] = self._breakdown(alarm, detectable, failure)

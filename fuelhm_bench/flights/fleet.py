@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.errors import range_error
+from fuelhm_bench.errors import ParameterError, range_error
 from fuelhm_bench.flights.mission import PHASE_NAMES, MissionProfile
 from fuelhm_bench.flights.schedule import ModeSchedule, UnitSchedule, draw_unit_schedule
 from fuelhm_bench.physics.model import Dispersion, LoopModel, manufacture
@@ -137,7 +137,7 @@ def _build_unit(config: FleetConfig, u: int) -> Unit:
 
 
 def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None, start: int = 0,
-                 stop: int | None = None) -> Iterator[list[SimulatedFlight]]:
+                 stop: int | None = None, units=None) -> Iterator[list[SimulatedFlight]]:
     """Simulate the fleet in batches of flights (bounded memory).
 
     Parameters
@@ -151,18 +151,30 @@ def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None, st
         Simulate only the flights ``start .. stop - 1`` of the fleet, in its
         order (unit by unit, flight by flight); the same flights as in the whole
         fleet, byte for byte. Default: all.
+    units : sequence of int, optional
+        Simulate only these units of the fleet (the same flights, bit for bit,
+        as in the whole fleet: every draw is seeded per unit and flight), within
+        ``start .. stop - 1``; None: all.
 
     Yields
     ------
     list of SimulatedFlight
     """
-    total = config.n_units * config.n_flights
-    first, last = range(total)[start:stop][:1], range(total)[start:stop][-1:]
-    if not first:
+    nf = config.n_flights
+    selected = range(config.n_units * nf)[start:stop]
+    if not selected:
         return
-    units = [_build_unit(config, u) for u in range(first[0] // config.n_flights, last[0] // config.n_flights + 1)]
-    todo = [(u, f) for u in units for f in range(config.n_flights)
-            if first[0] <= u.unit_id * config.n_flights + f <= last[0]]
+    lo, hi = selected[0], selected[-1]
+    if units is None:
+        wanted = range(lo // nf, hi // nf + 1)
+    else:
+        wanted = [int(u) for u in units]
+        bad = [u for u in wanted if not 0 <= u < config.n_units]
+        if bad:
+            raise ParameterError(f"The 'units' parameter of iter_flights must hold unit indices in "
+                                 f"[0, {config.n_units - 1}]. Got {bad[:5]} instead.")
+    fleet = [_build_unit(config, u) for u in wanted]
+    todo = [(u, f) for u in fleet for f in range(nf) if lo <= u.unit_id * nf + f <= hi]
     for start in range(0, len(todo), batch_size):
         chunk = todo[start:start + batch_size]
         models, inputs, rngs, labels, intens = [], [], [], [], []

@@ -151,12 +151,27 @@ class _Child:
             self.method.set_params(**shared)
             params = get_params()
         self.reply(repr=repr(self.method)[:2000], params=_json_value(params),
-                   shared_applied=sorted(shared), sandbox=sandbox)
+                   shared_applied=sorted(shared), sandbox=sandbox,
+                   needs_raw=bool(getattr(type(self.method), "needs_raw", False)))
+
+    def _pull_raw(self, counter: list):
+        """The raw training flights, asked from the caller one at a time as the method iterates."""
+        from fuelhm_bench.methods.raw import RawFlight
+
+        while True:
+            self.reply(request="raw_next")
+            op, payload = self.conn.recv()
+            if op != "raw" or payload is None:
+                return
+            counter[0] += 1
+            yield RawFlight(**payload)
 
     def op_fit(self, p: dict) -> None:
         t0, c0 = time.perf_counter(), time.process_time()
-        self.method.fit(p["table"], knowledge=p["knowledge"], random_state=p["random_state"])
-        self.reply(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
+        counter = [0]
+        kwargs = {"raw_flights": self._pull_raw(counter)} if p.get("raw_stream") else {}
+        self.method.fit(p["table"], knowledge=p["knowledge"], random_state=p["random_state"], **kwargs)
+        self.reply(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0, raw_flights_read=counter[0])
 
     def op_scores(self, p: dict) -> None:
         from fuelhm_bench.methods.base import run_table
@@ -180,7 +195,12 @@ class _Child:
             row = pd.Series(p["row_values"], index=index, dtype=object)
         else:
             row = p["row"]
-        d = self.method.decide(row)
+        if "raw" in p:
+            from fuelhm_bench.methods.raw import RawFlight
+
+            d = self.method.decide(row, raw=RawFlight(**p["raw"]))
+        else:
+            d = self.method.decide(row)
         if not isinstance(d, Decision):
             problem = decision_problem(d) or f"expected a Decision, got {type(d).__name__}"
             self.reply(status="invalid", message=problem)
@@ -190,7 +210,9 @@ class _Child:
     def op_check(self, p: dict) -> None:
         from fuelhm_bench.methods.checks import _run_one_check
 
-        self.reply(**_run_one_check(self.method, p["name"], p["data"]))
+        if p["data"] is not None:  # sent with the first check, kept for the next ones
+            self._check_data = p["data"]
+        self.reply(**_run_one_check(self.method, p["name"], self._check_data))
 
     # ------------------------------------------------------------------ loop
     def serve(self) -> None:

@@ -27,7 +27,7 @@ from fuelhm_bench.methods.tables import (DECISION_COLUMNS, GUILT_COLUMNS,
                                          check_indicator_table, empty_decisions)
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["BaseMethod", "clone_method", "has_batch_path", "run_table", "run_unit"]
+__all__ = ["BaseMethod", "clone_method", "has_batch_path", "method_needs_raw", "run_table", "run_unit"]
 
 
 class BaseMethod(abc.ABC):
@@ -330,12 +330,15 @@ class BaseMethod(abc.ABC):
         out = self._decide_batch(rows)
         return _batch_frame(rows, out, name)
 
-    def decide_unit(self, unit_table: pd.DataFrame) -> pd.DataFrame:
+    def decide_unit(self, unit_table: pd.DataFrame, *, raw: Any = None) -> pd.DataFrame:
         """Decide for every flight of one unit, causally (see :func:`run_unit`).
 
         A method with a batch path (:func:`has_batch_path`) decides the whole
         unit in one :meth:`decide_batch` call (its rows are independent).
+        ``raw``: for a method with ``needs_raw``, ``raw(row) -> RawFlight`` (see :func:`run_unit`).
         """
+        if method_needs_raw(self):
+            return run_unit(self, unit_table, raw=raw)
         if has_batch_path(self):
             check_indicator_table(unit_table, name="unit_table", owner="decide_unit",
                                   keys=("unit_id", "flight_index"))
@@ -343,9 +346,9 @@ class BaseMethod(abc.ABC):
             return self.decide_batch(ordered).reset_index(drop=True)
         return run_unit(self, unit_table)
 
-    def decide_table(self, indicators: pd.DataFrame) -> pd.DataFrame:
+    def decide_table(self, indicators: pd.DataFrame, *, raw: Any = None) -> pd.DataFrame:
         """Decide for every flight of every unit, causally (see :func:`run_table`)."""
-        return run_table(self, indicators)
+        return run_table(self, indicators, raw=raw)
 
     def _check_fitted(self, what: str) -> None:
         if not getattr(self, "is_fitted_", False):
@@ -353,7 +356,32 @@ class BaseMethod(abc.ABC):
 
 
 # ---------------------------------------------------------------------------
-def run_unit(method: Any, unit_table: pd.DataFrame) -> pd.DataFrame:
+def method_needs_raw(method: Any) -> bool:
+    """True when ``method`` (an instance or a class) declares ``needs_raw = True``.
+
+    Such a method receives the raw healthy training flights in ``fit`` and the
+    flight's full-rate samples with each decision (:mod:`fuelhm_bench.methods.raw`).
+    """
+    cls = method if isinstance(method, type) else type(method)
+    return bool(getattr(cls, "needs_raw", False))
+
+
+def _raw_of(raw: Any, row: pd.Series, name: str) -> Any:
+    """The RawFlight of ``row`` from the provider ``raw`` (a callable), checked."""
+    from fuelhm_bench.methods.raw import RawFlight
+
+    if raw is None:
+        raise MethodError(f"{name} needs the raw flights (needs_raw = True): pass raw=, a callable "
+                          f"returning the RawFlight of an indicator row.")
+    flight = raw(row)
+    if not isinstance(flight, RawFlight):
+        raise DataFormatError(f"The raw-flight provider must return a RawFlight for unit "
+                              f"{row.get('unit_id')!r}, flight {row.get('flight_index')}. Got "
+                              f"{type(flight).__name__} instead.")
+    return flight
+
+
+def run_unit(method: Any, unit_table: pd.DataFrame, *, raw: Any = None) -> pd.DataFrame:
     """Run a fitted method on one unit, flight by flight, in flight order.
 
     Only ``method.start_unit`` and ``method.decide`` are called (never a
@@ -368,6 +396,10 @@ def run_unit(method: Any, unit_table: pd.DataFrame) -> pd.DataFrame:
         Indicator rows of a single unit (columns ``unit_id``, ``flight_index`` and
         the indicators); sorted by ``flight_index`` here (the input is not
         modified).
+    raw : callable or None, default=None
+        For a method with ``needs_raw``: ``raw(row) -> RawFlight``, the
+        full-rate samples of the flight of an indicator row, called once per
+        flight just before its decision (so one flight at a time is in memory).
 
     Returns
     -------
@@ -399,9 +431,11 @@ def run_unit(method: Any, unit_table: pd.DataFrame) -> pd.DataFrame:
     alarms = np.empty(n, dtype=bool)
     guilt = np.empty((n, len(MODE_IDS)))
     name = type(method).__name__
+    with_raw = method_needs_raw(method)
     for i in range(n):
         row = ordered.iloc[i]
-        d = _raise_if_invalid(method.decide(row), name,
+        d = method.decide(row, raw=_raw_of(raw, row, name)) if with_raw else method.decide(row)
+        d = _raise_if_invalid(d, name,
                               f"for unit {unit_id!r}, flight {row['flight_index']}")
         scores[i], alarms[i], guilt[i] = d.score, d.alarm, d.guilt
     out = {"unit_id": ordered["unit_id"].to_numpy(),
@@ -475,7 +509,7 @@ def _run_table_batch(method: Any, indicators: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index(drop=True)
 
 
-def run_table(method: Any, indicators: pd.DataFrame) -> pd.DataFrame:
+def run_table(method: Any, indicators: pd.DataFrame, *, raw: Any = None) -> pd.DataFrame:
     """Run a fitted method on every unit of an indicator table (:func:`run_unit` per unit).
 
     A method with a batch path (:func:`has_batch_path`, no per-unit state) is
@@ -490,6 +524,9 @@ def run_table(method: Any, indicators: pd.DataFrame) -> pd.DataFrame:
         A fitted method.
     indicators : pandas.DataFrame
         Indicator table with ``unit_id`` and ``flight_index``.
+    raw : callable or None, default=None
+        The raw-flight provider of a method with ``needs_raw`` (see
+        :func:`run_unit`); such a method is always run row by row.
 
     Returns
     -------
@@ -499,9 +536,9 @@ def run_table(method: Any, indicators: pd.DataFrame) -> pd.DataFrame:
     """
     check_indicator_table(indicators, name="indicators", owner="run_table",
                           keys=("unit_id", "flight_index"))
-    if has_batch_path(method):
+    if has_batch_path(method) and not method_needs_raw(method):
         return _run_table_batch(method, indicators)
-    parts = [run_unit(method, group)
+    parts = [run_unit(method, group, raw=raw)
              for _, group in indicators.groupby("unit_id", sort=False, dropna=False)]
     if not parts:
         return empty_decisions()

@@ -25,7 +25,8 @@ import numpy as np
 import pandas as pd
 
 from fuelhm_bench.errors import MethodError
-from fuelhm_bench.methods.base import clone_method, has_batch_path, run_table, run_unit
+from fuelhm_bench.methods.base import (clone_method, has_batch_path, method_needs_raw, run_table,
+                                       run_unit)
 from fuelhm_bench.methods.decision import decision_problem
 from fuelhm_bench.methods.knowledge import Knowledge
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
@@ -61,16 +62,35 @@ class CheckData:
     knowledge : Knowledge
         Synthetic ITL, signatures and maximal intensities consistent with
         ``units``.
+    raw : dict
+        ``(unit_id, flight_index) -> RawFlight`` for every row of the three
+        tables (:func:`make_check_data` with ``raw=True``; empty otherwise):
+        short synthetic full-rate flights of a position loop whose valve gain
+        and null bias follow the same degradation as the indicators.
     """
 
     healthy: pd.DataFrame
     other_healthy: pd.DataFrame
     units: pd.DataFrame
     knowledge: Knowledge
+    raw: dict = field(default_factory=dict)
 
     def unit_tables(self) -> list[tuple[Any, pd.DataFrame]]:
         """``(unit_id, table)`` pairs of ``units`` in order of first appearance."""
         return [(u, g) for u, g in self.units.groupby("unit_id", sort=False)]
+
+    def raw_for(self, row: Any) -> Any:
+        """The RawFlight of an indicator row (the raw provider of :func:`run_unit`)."""
+        key = (row["unit_id"], int(row["flight_index"]))
+        if key not in self.raw:
+            raise MethodError(f"The check data has no raw flight for unit {key[0]!r}, flight "
+                              f"{key[1]} (build it with make_check_data(raw=True)).")
+        return self.raw[key]
+
+    def raw_flights(self, table: pd.DataFrame) -> Iterator[Any]:
+        """The raw flights of a table's rows, one at a time (the ``raw_flights`` of ``fit``)."""
+        for _, row in table.iterrows():
+            yield self.raw_for(row)
 
 
 def _indicator_frame(values: np.ndarray, unit_ids: Sequence[Any], flight_index: np.ndarray,
@@ -99,8 +119,36 @@ def _healthy_table(n_units: int, n_flights: int, prefix: str,
     return _indicator_frame(values, unit_ids, index, prefix, rng)
 
 
+def _raw_flight(unit_id: Any, k: int, gain: float, bias: float, rng: np.random.Generator,
+                n_samples: int = 600) -> Any:
+    """A short synthetic full-rate flight: position loop, valve velocity gain and null bias.
+
+    The position follows the demand with a lag; the current is what a valve of velocity
+    gain ``gain`` [mm/s/mA] and null bias ``bias`` [mA] needs to move it so, plus noise.
+    """
+    from fuelhm_bench.methods.raw import RawFlight
+
+    t = np.arange(n_samples) * 0.02
+    phase = rng.uniform(0.0, 2 * np.pi)
+    demand = 20.0 + 8.0 * np.sin(2 * np.pi * 0.1 * t + phase) + 3.0 * np.sin(2 * np.pi * 0.37 * t)
+    position = np.interp(t - 0.1, t, demand) + rng.normal(0.0, 0.005, t.size)
+    velocity = np.gradient(np.interp(t - 0.1, t, demand), t)
+    current = velocity / gain + bias + rng.normal(0.0, 0.01, t.size)
+    n2 = 80.0 + rng.normal(0.0, 0.2, t.size)
+    return RawFlight(unit_id, int(k), t, current, position, demand, n2)
+
+
+def _raw_table(table: pd.DataFrame, intensity: np.ndarray, rng: np.random.Generator) -> dict:
+    out = {}
+    gains = 6.0 + 0.05 * rng.standard_normal(len(table))
+    for i, (u, k) in enumerate(zip(table["unit_id"], table["flight_index"])):
+        out[(u, int(k))] = _raw_flight(u, int(k), gains[i] * (1.0 - 0.4 * intensity[i]),
+                                       0.05 + 0.3 * intensity[i], rng)
+    return out
+
+
 def make_check_data(random_state: int = 0, *, n_units: int = 3,
-                    n_flights: int = 12) -> CheckData:
+                    n_flights: int = 12, raw: bool = False) -> CheckData:
     """Build the synthetic data of the checks.
 
     Parameters
@@ -112,6 +160,9 @@ def make_check_data(random_state: int = 0, *, n_units: int = 3,
         degrades along mode ``MODE_IDS[u % 7]`` from flight ``n_flights // 3``).
     n_flights : int, default=12
         Flights per evaluation unit (>= 6).
+    raw : bool, default=False
+        Also build a synthetic raw flight for every row (:attr:`CheckData.raw`),
+        for methods with ``needs_raw``; its degradation follows the unit's.
 
     Returns
     -------
@@ -135,10 +186,11 @@ def make_check_data(random_state: int = 0, *, n_units: int = 3,
         max_intensity=max_intensity)
 
     onset = n_flights // 3
-    blocks, unit_ids = [], []
+    blocks, unit_ids, intensities = [], [], []
     for u in range(n_units):
         k = np.arange(n_flights)
         intensity = np.clip((k - onset + 1) / (n_flights - onset), 0.0, 1.0) if u else 0.0 * k
+        intensities.append(intensity)
         sig = signatures[u % len(MODE_IDS)]
         z = rng.standard_normal((n_flights, len(INDICATOR_NAMES))) + np.outer(intensity, sig)
         blocks.append(_HEALTHY_MEAN + _HEALTHY_STD * z)
@@ -148,7 +200,14 @@ def make_check_data(random_state: int = 0, *, n_units: int = 3,
         values[n_flights + 2, INDICATOR_NAMES.index("Hys0")] = np.nan
     units = _indicator_frame(values, unit_ids, np.tile(np.arange(n_flights), n_units), "check",
                              rng)
-    return CheckData(healthy=healthy, other_healthy=other, units=units, knowledge=knowledge)
+    raw_flights: dict = {}
+    if raw:
+        raw_rng = np.random.default_rng([random_state, 7])
+        raw_flights.update(_raw_table(healthy, np.zeros(len(healthy)), raw_rng))
+        raw_flights.update(_raw_table(other, np.full(len(other), 0.05), raw_rng))
+        raw_flights.update(_raw_table(units, np.concatenate(intensities), raw_rng))
+    return CheckData(healthy=healthy, other_healthy=other, units=units, knowledge=knowledge,
+                     raw=raw_flights)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -159,20 +218,75 @@ class _CheckFailure(Exception):
 def _fit(method: Any, data: CheckData, *, table: pd.DataFrame | None = None,
          seed: int = _SEED) -> Any:
     table = data.healthy if table is None else table
-    out = method.fit(table, knowledge=data.knowledge, raw_flights=None, random_state=seed)
+    raw = data.raw_flights(table) if _needs_raw(method) else None
+    out = method.fit(table, knowledge=data.knowledge, raw_flights=raw, random_state=seed)
     return method if out is None else out
 
 
-def _fresh(method: Any, data: CheckData, seed: int = _SEED) -> Any:
+def _needs_raw(method: Any) -> bool:
+    return method_needs_raw(method)
+
+
+def _decide(method: Any, row: pd.Series, data: CheckData) -> Any:
+    """``method.decide(row)``, with the row's raw flight for a method with ``needs_raw``."""
+    if _needs_raw(method):
+        return method.decide(row, raw=data.raw_for(row))
+    return method.decide(row)
+
+
+def _raw_arg(method: Any, data: CheckData) -> dict:
+    """``{"raw": provider}`` for run_unit / decide_unit of a raw method, else ``{}``."""
+    return {"raw": data.raw_for} if _needs_raw(method) else {}
+
+
+#: The last fitted method of :func:`_fresh` (key, fitted): the checks that only need "a method
+#: fitted on the healthy table with seed s" share one fit (a deep copy each), so that
+#: check_method fits an expensive estimator a handful of times instead of once per check. The
+#: checks about fitting itself (determinism, refit, clone, fit returns self) always fit anew.
+_FITTED: list = []
+
+
+def _fingerprint(data: CheckData, seed: int) -> tuple:
+    table = data.healthy
+    hashed = int(pd.util.hash_pandas_object(table, index=True).sum()) if len(table) else 0
+    return (seed, hashed, tuple(table.columns), id(type(data.knowledge)), len(data.raw))
+
+
+def _fresh(method: Any, data: CheckData, seed: int = _SEED, *, shared: bool = True) -> Any:
     m = clone_method(method)
+    key = None
+    if shared:
+        try:
+            key = (type(method), repr(m.get_params(deep=False)), _fingerprint(data, seed))
+        except Exception:  # noqa: BLE001 - an unhashable parameter: fit anew
+            key = None
+        if key is not None and _FITTED and _FITTED[0][0] == key:
+            try:
+                return copy.deepcopy(_FITTED[0][1])
+            except Exception:  # noqa: BLE001 - not deep-copyable: fit anew
+                pass
     _fit(m, data, seed=seed)
+    if key is not None:
+        try:
+            _FITTED[:] = [(key, copy.deepcopy(m))]
+        except Exception:  # noqa: BLE001
+            _FITTED.clear()
     return m
 
 
 def _run_units(method: Any, data: CheckData) -> pd.DataFrame:
-    # run_table: row by row per unit, or the batch path of a method that has one (its agreement
-    # with start_unit + decide is checked by check_decide_unit_consistent).
-    return run_table(method, data.units)
+    """Decisions for every check unit: row by row per unit, or one batch for a batch method.
+
+    A method with a batch path decides every row on its own (its agreement with start_unit +
+    decide is checked by check_decide_unit_consistent, and its causality by
+    check_no_lookahead), so the checks that compare two runs use one ``decide_batch`` call over
+    the whole table instead of the harness's causal waves (a dozen calls of the estimator).
+    """
+    if has_batch_path(method):
+        ordered = data.units.assign(_u=pd.factorize(data.units["unit_id"])[0]).sort_values(
+            ["_u", "flight_index"], kind="stable").drop(columns="_u")
+        return method.decide_batch(ordered).reset_index(drop=True)
+    return run_table(method, data.units, raw=data.raw_for if _needs_raw(method) else None)
 
 
 #: Relative tolerance between the batch path and row-by-row decisions of a method with a batch
@@ -272,22 +386,27 @@ def check_constructor_stores_params(method: Any, data: CheckData) -> None:
 def check_fit_returns_self(method: Any, data: CheckData) -> None:
     """fit returns the method itself."""
     m = clone_method(method)
-    out = m.fit(data.healthy, knowledge=data.knowledge, raw_flights=None, random_state=_SEED)
+    raw = data.raw_flights(data.healthy) if _needs_raw(method) else None
+    out = m.fit(data.healthy, knowledge=data.knowledge, raw_flights=raw, random_state=_SEED)
     if out is not m:
         raise _CheckFailure(f"fit returned {type(out).__name__} instead of self")
 
 
 def check_outputs_valid(method: Any, data: CheckData) -> None:
-    """Every decision is valid: finite score, bool alarm, guilt (7,) >= 0 summing to 1 on alarm."""
+    """Every decision is valid: finite score, bool alarm, guilt (7,) >= 0 summing to 1 on alarm.
+
+    A method with a batch path is decided row by row on its first unit only (every row of every
+    unit is compared with its batch decision by check_decide_unit_consistent).
+    """
     m = _fresh(method, data)
-    for unit_id, table in data.unit_tables():
+    for n_unit, (unit_id, table) in enumerate(data.unit_tables()):
         ordered = table.sort_values("flight_index")
         m.start_unit(unit_id)
-        for i in range(len(ordered)):
+        for i in range(len(ordered) if n_unit == 0 or not has_batch_path(method) else 0):
             row = ordered.iloc[i]
             k = row["flight_index"]
             try:
-                d = m.decide(row)
+                d = _decide(m, row, data)
             except Exception as exc:  # report where the method failed
                 raise _CheckFailure(f"decide raised {type(exc).__name__} at flight {k} of unit "
                                     f"{unit_id!r}: {exc}") from exc
@@ -295,7 +414,7 @@ def check_outputs_valid(method: Any, data: CheckData) -> None:
             if problem is not None:
                 raise _CheckFailure(f"decision at flight {k} of unit {unit_id!r} is invalid: "
                                     f"{problem}")
-        out = m.decide_unit(table)
+        out = m.decide_unit(table, **_raw_arg(method, data))
         if not isinstance(out, pd.DataFrame) or list(out.columns) != list(DECISION_COLUMNS):
             cols = list(out.columns) if isinstance(out, pd.DataFrame) else type(out).__name__
             raise _CheckFailure(f"decide_unit must return a DataFrame with columns "
@@ -311,8 +430,8 @@ def check_outputs_valid(method: Any, data: CheckData) -> None:
 
 def check_seeded_determinism(method: Any, data: CheckData) -> None:
     """Two fits with the same seed give identical decisions."""
-    a = _run_units(_fresh(method, data), data)
-    b = _run_units(_fresh(method, data), data)
+    a = _run_units(_fresh(method, data, shared=False), data)
+    b = _run_units(_fresh(method, data, shared=False), data)
     diff = _first_difference(a, b)
     if diff is not None:
         raise _CheckFailure(f"two fits with random_state={_SEED} gave different decisions: "
@@ -324,7 +443,7 @@ def check_no_lookahead(method: Any, data: CheckData) -> None:
     fitted = _fresh(method, data)  # each run below starts from a copy of the same fitted state
     for unit_id, table in data.unit_tables():
         table = table.sort_values("flight_index", kind="stable").reset_index(drop=True)
-        full = copy.deepcopy(fitted).decide_unit(table)
+        full = copy.deepcopy(fitted).decide_unit(table, **_raw_arg(method, data))
         n = len(table)
         for cut in sorted({n // 3, (2 * n) // 3}):
             later = table["flight_index"].to_numpy()[cut + 1:]
@@ -343,7 +462,9 @@ def check_no_lookahead(method: Any, data: CheckData) -> None:
             variants.append((table.iloc[:cut + 1].copy(),
                              f"flights after {table['flight_index'][cut]} were removed"))
             for variant, what in variants:
-                out = copy.deepcopy(fitted).decide_unit(variant)
+                raw = {"raw": _changed_raw(data, unit_id, int(table["flight_index"][cut]))} \
+                    if _needs_raw(method) else {}
+                out = copy.deepcopy(fitted).decide_unit(variant, **raw)
                 for i in range(cut + 1):
                     diff = _first_difference(full.iloc[[i]], out.iloc[[i]],
                                              close=has_batch_path(method))
@@ -352,18 +473,34 @@ def check_no_lookahead(method: Any, data: CheckData) -> None:
                                             f"unit {unit_id!r} changed when {what}")
 
 
+def _changed_raw(data: CheckData, unit_id: Any, last: int) -> Callable[[Any], Any]:
+    """A raw provider whose flights of ``unit_id`` after flight ``last`` are changed."""
+    from fuelhm_bench.methods.raw import RawFlight
+
+    def provider(row: Any) -> Any:
+        flight = data.raw_for(row)
+        if row["unit_id"] != unit_id or int(row["flight_index"]) <= last:
+            return flight
+        return RawFlight(flight.unit_id, flight.flight_index, flight.time_s,
+                         1.5 * flight.current_mA + 0.3, flight.position_mm + 2.0,
+                         flight.demand_mm, flight.n2_pct)
+
+    return provider
+
+
 def check_decide_unit_consistent(method: Any, data: CheckData) -> None:
     """decide_unit equals start_unit + decide flight by flight, whatever the row order."""
     rng = np.random.default_rng(_SEED)
     fitted = _fresh(method, data)  # each run below starts from a copy of the same fitted state
+    raw = _raw_arg(method, data)
     for _, table in data.unit_tables():
-        a = copy.deepcopy(fitted).decide_unit(table)
-        b = run_unit(copy.deepcopy(fitted), table)
+        a = copy.deepcopy(fitted).decide_unit(table, **raw)
+        b = run_unit(copy.deepcopy(fitted), table, **raw)
         diff = _first_difference(a, b, close=has_batch_path(method))
         if diff is not None:
             raise _CheckFailure(f"decide_unit differs from start_unit + decide: {diff}")
         shuffled = table.iloc[rng.permutation(len(table))]
-        c = copy.deepcopy(fitted).decide_unit(shuffled)
+        c = copy.deepcopy(fitted).decide_unit(shuffled, **raw)
         diff = _first_difference(a, c, close=has_batch_path(method))
         if diff is not None:
             raise _CheckFailure(f"decide_unit depends on the row order of its input: {diff}")
@@ -385,18 +522,19 @@ def check_inputs_not_mutated(method: Any, data: CheckData) -> None:
             raise _CheckFailure(f"fit modified {name!r}: {change}")
     if mi is not None and dict(know.max_intensity) != mi:
         raise _CheckFailure("fit modified 'knowledge.max_intensity'")
-    for unit_id, table in data.unit_tables():
+    for n_unit, (unit_id, table) in enumerate(data.unit_tables()):
         snapshot = table.copy(deep=True)
-        m.decide_unit(table)
+        m.decide_unit(table, **_raw_arg(method, data))
         change = _frame_change(snapshot, table)
         if change is not None:
             raise _CheckFailure(f"decide_unit modified 'unit_table' of unit {unit_id!r}: {change}")
         m.start_unit(unit_id)
         ordered = table.sort_values("flight_index")
-        for i in range(len(ordered)):
+        # a batch method's rows are decided on their own: one unit shows a mutation as well as all
+        for i in range(len(ordered) if n_unit == 0 or not has_batch_path(method) else 0):
             row = ordered.iloc[i]
             row_before = row.copy(deep=True)
-            m.decide(row)
+            _decide(m, row, data)
             if not row.equals(row_before) or list(row.index) != list(row_before.index):
                 raise _CheckFailure(f"decide modified its observation row (flight "
                                     f"{row_before['flight_index']} of unit {unit_id!r})")
@@ -427,15 +565,17 @@ def check_start_unit_resets(method: Any, data: CheckData) -> None:
     if len(tables) < 2:
         return
     (first_id, first), (last_id, last) = tables[0], tables[-1]
-    alone = run_unit(_fresh(method, data), last)
+    raw = _raw_arg(method, data)
+    alone = run_unit(_fresh(method, data), last, **raw)
     m = _fresh(method, data)
-    for _, table in tables:
-        run_unit(m, table)
+    # a batch method declares no per-unit state: one unit before is enough to show a leak
+    for _, table in (tables[:1] if has_batch_path(method) and not raw else tables):
+        run_unit(m, table, **raw)
     m.start_unit(first_id)  # an interrupted unit
     ordered = first.sort_values("flight_index")
     for i in range(len(ordered) // 2):
-        m.decide(ordered.iloc[i])
-    diff = _first_difference(alone, run_unit(m, last))
+        _decide(m, ordered.iloc[i], data)
+    diff = _first_difference(alone, run_unit(m, last, **raw))
     if diff is not None:
         raise _CheckFailure(f"decisions for unit {last_id!r} depend on the units processed "
                             f"before it (start_unit must reset the per-unit history): {diff}")
@@ -467,6 +607,35 @@ def check_pickle_roundtrip(method: Any, data: CheckData) -> None:
         raise _CheckFailure(f"the unpickled method gave different decisions: {diff}")
 
 
+def check_raw_used(method: Any, data: CheckData) -> None:
+    """A method declaring ``needs_raw`` decides from the raw flight: other samples, other scores.
+
+    The check units are decided twice from the same fitted state, with their own raw flights and
+    with those of healthy training flights in their place (the indicator rows unchanged); at
+    least one score must differ, or the method declares raw flights it does not use (and would
+    score like a method that ignores them). Skipped for methods without ``needs_raw``.
+    """
+    if not _needs_raw(method):
+        return
+    from fuelhm_bench.methods.raw import RawFlight
+
+    fitted = _fresh(method, data)
+    donors = [data.raw_for(row) for _, row in data.healthy.iterrows()]
+
+    def swapped(row: Any) -> Any:
+        i = data.units.index.get_loc(row.name) if row.name in data.units.index else 0
+        d = donors[i % len(donors)]
+        return RawFlight(row["unit_id"], int(row["flight_index"]), d.time_s, d.current_mA,
+                         d.position_mm, d.demand_mm, d.n2_pct)
+
+    own = run_table(copy.deepcopy(fitted), data.units, raw=data.raw_for)
+    other = run_table(copy.deepcopy(fitted), data.units, raw=swapped)
+    if np.array_equal(own["score"].to_numpy(float), other["score"].to_numpy(float)):
+        raise _CheckFailure("it declares needs_raw = True but its scores did not change when every "
+                            "raw flight was replaced by another one (the method does not use the "
+                            "raw samples it asks for)")
+
+
 #: The checks in the order they run; cheap structural checks first.
 _CHECKS: tuple[Callable[[Any, CheckData], None], ...] = (
     check_constructor_stores_params,
@@ -480,7 +649,13 @@ _CHECKS: tuple[Callable[[Any, CheckData], None], ...] = (
     check_start_unit_resets,
     check_clone,
     check_pickle_roundtrip,
+    check_raw_used,
 )
+
+
+def _checks_for(method: Any) -> tuple[Callable[[Any, CheckData], None], ...]:
+    """The checks that apply to ``method`` (check_raw_used only with ``needs_raw``)."""
+    return tuple(f for f in _CHECKS if f is not check_raw_used or _needs_raw(method))
 
 
 @dataclass(frozen=True, eq=False)
@@ -512,7 +687,8 @@ class MethodCheck:
         MethodError
             "<check> failed for <MethodClass>: <what happened>".
         """
-        data = make_check_data(_SEED) if self.data is None else _copy_data(self.data)
+        data = (make_check_data(_SEED, raw=_needs_raw(self.method)) if self.data is None
+                else _copy_data(self.data))
         prefix = f"{self.name} failed for {type(self.method).__name__}: "
         try:
             self.func(self.method, data)
@@ -543,8 +719,8 @@ def iter_checks(method: Any, *, data: CheckData | None = None) -> Iterator[Metho
     >>> [c.name for c in iter_checks(NullMethod())][:3]
     ['check_constructor_stores_params', 'check_fit_returns_self', 'check_outputs_valid']
     """
-    shared = make_check_data(_SEED) if data is None else data
-    for func in _CHECKS:
+    shared = make_check_data(_SEED, raw=_needs_raw(method)) if data is None else data
+    for func in _checks_for(method):
         yield MethodCheck(name=func.__name__, method=method, func=func, data=shared)
 
 
@@ -585,7 +761,7 @@ def check_method(method: Any, *, data: CheckData | None = None, sealed: bool = T
         return
     from fuelhm_bench.methods.sandbox import Limits, SealedFailure, SealedMethod
 
-    shared = make_check_data(_SEED) if data is None else data
+    shared = make_check_data(_SEED, raw=_needs_raw(method)) if data is None else data
     name = type(method).__name__
     sandbox = SealedMethod(method, limits=Limits(wall_s=float(timeout_s)))
     try:
@@ -594,10 +770,10 @@ def check_method(method: Any, *, data: CheckData | None = None, sealed: bool = T
         except SealedFailure as exc:
             raise MethodError(f"{name} could not be started in a sealed process: {exc.status}: "
                               f"{exc.message}") from None
-        for func in _CHECKS:
-            try:
-                reply = sandbox.call("check", {"name": func.__name__, "data": shared}, phase=func.__name__,
-                                     timeout_s=float(timeout_s))
+        for n_check, func in enumerate(_checks_for(method)):
+            try:  # the data travels once; the sealed process keeps it for the next checks
+                reply = sandbox.call("check", {"name": func.__name__, "data": shared if n_check == 0 else None},
+                                     phase=func.__name__, timeout_s=float(timeout_s))
             except SealedFailure as exc:
                 raise MethodError(f"{func.__name__} failed for {name}: {exc.status}: {exc.message}") from None
             if reply.get("failed"):
@@ -638,7 +814,7 @@ def parametrize_with_checks(methods: Sequence[Any]) -> Any:
     """
     import pytest  # test-time dependency only
 
-    data = make_check_data(_SEED)
+    data = make_check_data(_SEED, raw=any(_needs_raw(m) for m in methods))
     checks = [c for m in methods for c in iter_checks(m, data=data)]
     ids = [f"{type(c.method).__name__}-{c.name}" for c in checks]
     return pytest.mark.parametrize("check", checks, ids=ids)

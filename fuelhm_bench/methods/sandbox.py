@@ -9,9 +9,16 @@ The isolation model (also in docs/methods.md):
   memory (environment, fault schedule, labels) exists in it.
 * **Only what a method may see, over a pipe.** The caller sends the healthy
   training tables, the published knowledge and then one observation row per
-  flight (the message carries a ``payload`` mapping so that raw samples can be
-  added later); the child answers with plain JSON (never pickle), which the
-  caller validates.
+  flight; the child answers with plain JSON (never pickle), which the caller
+  validates. A method that declares ``needs_raw`` (the child reports it at
+  start-up) also receives raw flights over the same pipe, as binary numpy
+  buffers (pickle protocol 5 of float64 arrays, caller to child only), one
+  flight at a time: with each decision the flight's full-rate samples, and
+  during ``fit`` the healthy training flights *pulled* by the child one by one
+  (the child asks for the next flight when the method's iterator advances),
+  so neither process ever holds more than one raw flight of the stream. The
+  raw flights come from the caller; the child never reads the simulation
+  cache (denied) and sees no labels.
 * **File system.** Where the kernel offers Landlock (Linux >= 5.13, no
   privilege needed) the child restricts itself before importing the method: it
   may read the Python installation, the directories on its import path that do
@@ -167,6 +174,21 @@ def source_hash(entry_point: str) -> str:
     return hashlib.sha256(origin.read_bytes()).hexdigest()
 
 
+def _imported_roots() -> list[str]:
+    """Roots of the top-level packages imported in this process (editable installs live outside sys.path).
+
+    A method instance built here (a notebook, a script) may import packages that an editable install
+    serves through an import hook from a source folder: the sealed process must be able to read them.
+    """
+    roots = []
+    for name, module in list(sys.modules.items()):
+        origin = getattr(module, "__file__", None) if "." not in name else None
+        if origin:
+            p = Path(origin)
+            roots.append(str(p.parent if p.name == "__init__.py" else p))
+    return roots
+
+
 def _python_roots() -> list[str]:
     roots = {sys.prefix, sys.base_prefix, sys.exec_prefix, sys.base_exec_prefix,
              str(Path(sys.executable).resolve().parent)}
@@ -209,6 +231,17 @@ class _LogPump(threading.Thread):
                 if self.dropped:
                     sink.write(f"\n[log cut at {self.limit} bytes; {self.dropped} more bytes dropped]\n".encode())
                 sink.close()
+
+
+def _raw_payload(flight: Any) -> dict:
+    """A RawFlight as plain float64 arrays (pickled as binary buffers over the pipe)."""
+    from fuelhm_bench.methods.raw import RAW_SIGNALS
+
+    out = {name: np.ascontiguousarray(getattr(flight, name), dtype=np.float64) for name in RAW_SIGNALS}
+    unit = flight.unit_id
+    out["unit_id"] = unit.item() if isinstance(unit, np.generic) else unit
+    out["flight_index"] = int(flight.flight_index)
+    return out
 
 
 class SealedMethod:
@@ -285,6 +318,8 @@ class SealedMethod:
             if root is not None:
                 readable.append(str(root))
         readable += [p for p in path if os.path.isdir(p) and not any(self._contains(p, d) for d in self.deny)]
+        if not isinstance(self.method, str):  # an instance: the packages its module needed are imported here
+            readable += [r for r in _imported_roots() if not any(self._contains(d, r) for d in self.deny)]
         readable = [p for p in dict.fromkeys(readable) if not any(self._contains(p, d) for d in self.deny)]
         method = self.method
         if not isinstance(method, str):  # by value when its class is not importable (a notebook, a script)
@@ -355,10 +390,29 @@ class SealedMethod:
         return None if self._proc is None else self._proc.pid
 
     # ------------------------------------------------------------------ the calls
-    def fit(self, healthy_indicators, *, knowledge=None, random_state=None) -> dict:
-        """``method.fit`` in the sealed process; returns ``{"wall_s", "cpu_s"}`` measured there."""
-        return self._call("fit", {"table": healthy_indicators, "knowledge": knowledge, "random_state": random_state},
-                          phase="fit")
+    @property
+    def needs_raw(self) -> bool:
+        """True when the started method declares ``needs_raw`` (reported by the sealed process)."""
+        return bool(self.info.get("needs_raw", False))
+
+    def fit(self, healthy_indicators, *, knowledge=None, random_state=None, raw_flights=None) -> dict:
+        """``method.fit`` in the sealed process; returns ``{"wall_s", "cpu_s", "raw_flights_read"}`` measured there.
+
+        ``raw_flights``: an iterable of :class:`~fuelhm_bench.methods.raw.RawFlight`, pulled one flight
+        at a time by the sealed process while the method iterates over ``fit(raw_flights=...)``.
+        """
+        payload = {"table": healthy_indicators, "knowledge": knowledge, "random_state": random_state,
+                   "raw_stream": raw_flights is not None}
+        if raw_flights is None:
+            return self._call("fit", payload, phase="fit")
+        flights = iter(raw_flights)
+        self._send("fit", payload, "fit")
+        while True:
+            reply = self._receive("fit")
+            if reply.get("request") != "raw_next":
+                return self._checked(reply, "fit")
+            flight = next(flights, None)
+            self._send("raw", None if flight is None else _raw_payload(flight), "fit")
 
     def scores(self, indicators) -> np.ndarray:
         """Scores of ``run_table(method, indicators)`` (unit by unit, causal), validated finite floats."""
@@ -379,7 +433,8 @@ class SealedMethod:
     def decide(self, row, *, raw=None, where: str = "decide"):
         """``method.decide(row)``; returns a validated :class:`~fuelhm_bench.methods.Decision`.
 
-        ``raw`` (reserved): the flight's raw samples, for methods that declare they need them.
+        ``raw``: the flight's :class:`~fuelhm_bench.methods.raw.RawFlight`, for a method with
+        ``needs_raw`` (sent as binary float64 buffers).
         """
         from fuelhm_bench.methods.decision import Decision, decision_problem
 
@@ -388,7 +443,7 @@ class SealedMethod:
         else:
             payload = {"row": row}
         if raw is not None:
-            payload["raw"] = raw
+            payload["raw"] = _raw_payload(raw)
         reply = self._call("decide", payload, phase=where)
         try:
             decision = Decision(score=float(reply["score"]), alarm=bool(reply["alarm"]),
@@ -407,14 +462,22 @@ class SealedMethod:
             self._deadline = time.monotonic() + float(timeout_s)
         return self._call(op, payload, phase=phase)
 
-    def _call(self, op: str, payload: dict, *, phase: str) -> dict:
+    def _send(self, op: str, payload: Any, phase: str) -> None:
         if self._proc is None or self._conn is None:
             raise SealedFailure("error", f"{self.name}: the sealed process is not running ({phase}).")
         try:
             self._conn.send((op, payload))
         except (BrokenPipeError, ConnectionResetError, OSError):
             raise self._dead(phase) from None
-        reply = self._receive(phase)
+
+    def _call(self, op: str, payload: dict, *, phase: str) -> dict:
+        self._send(op, payload, phase)
+        return self._checked(self._receive(phase), phase)
+
+    def _checked(self, reply: dict, phase: str) -> dict:
+        if reply.get("request") is not None:
+            raise SealedFailure("invalid", f"{self.name}: unexpected request {str(reply['request'])[:40]!r} "
+                                           f"during {phase}.")
         if reply.get("status", "ok") != "ok":
             status = reply.get("status") if reply.get("status") in ("error", "memory", "invalid") else "error"
             message = str(reply.get("message", "")).splitlines()[0][:500] if reply.get("message") else ""

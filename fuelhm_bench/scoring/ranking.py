@@ -23,6 +23,7 @@ entry has no KPI); :func:`mean_ranks` reports how many blocks were used.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from itertools import combinations
 from typing import Sequence
 
@@ -32,8 +33,8 @@ from scipy import stats
 
 from fuelhm_bench.errors import DataFormatError, ParameterError
 
-__all__ = ["critical_difference", "friedman_test", "mean_ranks", "rank_matrix",
-           "wilcoxon_holm", "cd_diagram"]
+__all__ = ["Aggregate", "aggregate_ranking", "critical_difference", "friedman_test", "mean_ranks",
+           "rank_matrix", "wilcoxon_holm", "cd_diagram"]
 
 _BLOCKS = ("scenario", "seed")
 
@@ -297,3 +298,127 @@ def cd_diagram(ranks: pd.DataFrame, cd: float, *, title: str = "") -> str:
                          f'stroke-width="3"/>')
     parts.append("</svg>")
     return "".join(parts)
+
+
+@dataclass(frozen=True, eq=False)
+class Aggregate:
+    """The aggregate of a leaderboard over its blocks (see :func:`aggregate_ranking`).
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        One row per entry, best mean rank first: ``method``, ``mean_rank``,
+        ``n_blocks``, ``mean_<value>`` (over the complete blocks),
+        ``rank_gap_to_best``, ``nemenyi_differs_from_best`` (gap > CD) and
+        ``wilcoxon_holm_p_vs_best`` (Holm-corrected p of the pair with the best
+        entry; NaN for the best itself or with fewer than 2 blocks).
+    friedman : dict
+        :func:`friedman_test` (``statistic``, ``pvalue``, ``n_methods``, ``n_blocks``, ``note``).
+    critical_difference : float
+        Nemenyi CD at ``alpha`` (NaN with fewer than 2 entries or no complete block).
+    pairs : pandas.DataFrame
+        :func:`wilcoxon_holm` over all pairs (empty with fewer than 2 blocks).
+    alpha : float
+    value : str
+        The ranked KPI.
+    """
+
+    table: pd.DataFrame
+    friedman: dict
+    critical_difference: float
+    pairs: pd.DataFrame
+    alpha: float
+    value: str
+
+    def summary(self) -> str:
+        """One paragraph stating the test results with their numbers (for Markdown views)."""
+        fr, k, n = self.friedman, self.friedman["n_methods"], self.friedman["n_blocks"]
+        if fr["pvalue"] == fr["pvalue"]:
+            text = (f"Friedman test over {n} blocks (scenario x seed) and {k} entries: chi2 = "
+                    f"{fr['statistic']:.3g}, p = {fr['pvalue']:.3g}.")
+        else:
+            text = f"{fr['note']}."
+        if math.isfinite(self.critical_difference):
+            n_diff = int(self.table["nemenyi_differs_from_best"].sum())
+            text += (f" Nemenyi critical difference at alpha = {self.alpha:g}: {self.critical_difference:.3g} "
+                     f"mean ranks; {n_diff} of {k - 1} entries differ significantly from the best.")
+        if len(self.pairs):
+            text += (f" Wilcoxon signed-rank with Holm's correction: {int(self.pairs['significant'].sum())} of "
+                     f"{len(self.pairs)} pairs differ at alpha = {self.alpha:g}.")
+        return text
+
+
+def aggregate_ranking(results: pd.DataFrame, *, value: str = "summary_score", alpha: float = 0.05,
+                      blocks: Sequence[str] = _BLOCKS) -> Aggregate:
+    """Mean ranks, Friedman test, Nemenyi CD and Wilcoxon-Holm of a leaderboard (the one home of its aggregate).
+
+    Parameters
+    ----------
+    results : pandas.DataFrame
+        Leaderboard rows: ``method``, optionally ``params`` (an entry is a
+        method with its parameters: ``"<method> <params>"`` when a method
+        appears with several), ``status`` (only ``"ok"`` rows enter), the
+        ``blocks`` columns and ``value``.
+    value : str, default="summary_score"
+        KPI to rank (higher is better).
+    alpha : float, default=0.05
+    blocks : sequence of str, default=("scenario", "seed")
+
+    Returns
+    -------
+    Aggregate
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> r = pd.DataFrame({"method": list("abc") * 4, "scenario": [s for s in "wxyz" for _ in range(3)],
+    ...                   "summary_score": [9, 5, 1, 8, 6, 2, 9, 4, 3, 7, 6, 1.0]})
+    >>> agg = aggregate_ranking(r)
+    >>> agg.table[["method", "mean_rank"]].values.tolist()
+    [['a', 1.0], ['b', 2.0], ['c', 3.0]]
+    >>> round(agg.friedman["pvalue"], 4), round(agg.critical_difference, 3)
+    (0.0183, 1.657)
+    """
+    frame = results
+    if "status" in frame.columns:
+        frame = frame[frame["status"] == "ok"]
+    if value not in frame.columns:
+        raise DataFormatError(f"The 'results' parameter of aggregate_ranking must have a {value!r} column. "
+                              f"Got columns {list(results.columns)} instead.")
+    frame = frame[pd.to_numeric(frame[value], errors="coerce").notna()].copy()
+    if "params" in frame.columns:
+        several = frame.groupby("method")["params"].transform("nunique") > 1
+        frame["method"] = np.where(several, frame["method"] + " " + frame["params"].fillna("").astype(str),
+                                   frame["method"])
+    keys = {"value": value, "blocks": blocks}
+    empty_pairs = pd.DataFrame(columns=["method_a", "method_b", "pvalue", "pvalue_holm", "significant"])
+    if frame["method"].nunique() < 2:
+        table = pd.DataFrame(columns=["method", "mean_rank", "n_blocks", f"mean_{value}", "rank_gap_to_best",
+                                      "nemenyi_differs_from_best", "wilcoxon_holm_p_vs_best"])
+        note = "fewer than two entries with results: no ranking"
+        return Aggregate(table, {"statistic": math.nan, "pvalue": math.nan, "n_methods": frame["method"].nunique(),
+                                 "n_blocks": 0, "note": note}, math.nan, empty_pairs, alpha, value)
+    ranks = rank_matrix(frame, **keys)
+    table = mean_ranks(frame, **keys)
+    fr = friedman_test(frame, **keys)
+    k, n = len(table), len(ranks)
+    cd = critical_difference(k, n, alpha) if n >= 1 else math.nan
+    complete = ranks.index
+    key_cols = list(complete.names)
+    if key_cols != ["_block"]:
+        sub = frame.set_index(key_cols)
+        sub = sub[sub.index.isin(complete)]
+        means = sub.groupby("method")[value].apply(lambda v: float(pd.to_numeric(v).mean()))
+    else:
+        means = frame.groupby("method")[value].apply(lambda v: float(pd.to_numeric(v).mean()))
+    table[f"mean_{value}"] = table["method"].map(means)
+    best = table["method"].iloc[0]
+    table["rank_gap_to_best"] = table["mean_rank"] - table["mean_rank"].iloc[0]
+    table["nemenyi_differs_from_best"] = table["rank_gap_to_best"] > cd if math.isfinite(cd) else False
+    pairs = wilcoxon_holm(frame, alpha=alpha, **keys) if n >= 2 else empty_pairs
+    p_best = {}
+    for r in pairs.itertuples():
+        if best in (r.method_a, r.method_b):
+            p_best[r.method_b if r.method_a == best else r.method_a] = r.pvalue_holm
+    table["wilcoxon_holm_p_vs_best"] = table["method"].map(p_best).astype(float)
+    return Aggregate(table, fr, cd, pairs, alpha, value)
