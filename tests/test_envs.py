@@ -368,7 +368,7 @@ def test_knowledge_cache_memory_disk_and_fresh_build_agree(tmp_path):
     first = published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path)
     assert published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path) is first
     entries = list((tmp_path / "fuelhm-v1").iterdir())
-    assert len(entries) == 1 and entries[0].name.startswith("knowledge-paper_2012-v2-")
+    assert len(entries) == 1 and entries[0].name.startswith("knowledge-paper_2012-v3-")
     clear_memory_cache()
     from_disk = published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path)
     fresh = build_knowledge(knowledge_build(sc, flight_minutes=MINUTES, size=SMALL))

@@ -653,7 +653,7 @@ class Scenario(Spec):
     >>> from fuelhm_bench.scenarios import load_scenario
     >>> s = load_scenario("paper_2012")
     >>> s.id
-    'paper_2012-v2'
+    'paper_2012-v3'
     >>> s.test_fleet_config().n_units == s.fleet.units
     True
     """
