@@ -111,6 +111,8 @@ def _labels(truth: dict, n_flights: int) -> pd.DataFrame:
         data[f"max_intensity_{m}"] = np.full(n_flights, truth["max_intensity"][j])
     for j, m in enumerate(MODE_IDS):
         data[f"onset_{m}"] = np.full(n_flights, truth["onset"][j], dtype=np.int64)
+    data["unknown_fault"] = np.full(n_flights, truth.get("unknown_fault", ""), dtype=object)
+    data["onset_unknown"] = np.full(n_flights, truth.get("unknown_onset", -1), dtype=np.int64)
     return pd.DataFrame(data)
 
 
