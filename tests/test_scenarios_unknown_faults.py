@@ -175,6 +175,10 @@ def test_library_only_classifier_gets_no_diagnosis_credit_on_unknown_faults():
     # diagnosis: naming one of the seven modes is wrong, naming none is right
     assert terms["names_a_mode"]["accuracy"] == 0.0 and terms["says_unknown"]["accuracy"] == 1.0
     assert kpis["says_unknown"]["summary_score"] == pytest.approx(100.0)
+    from fuelhm_bench.scoring import perfect_decisions  # the oracle anchor names no mode on an unknown fault
+
+    perfect = headline_kpis(score_run(Run(labels, perfect_decisions(labels), healthy_scores)))
+    assert perfect["summary_score"] == pytest.approx(100.0) and perfect["fnr_standard_alarm"] == 0.0
     assert kpis["blind"]["summary_score"] == pytest.approx(50.0)   # perfect on the leak, nothing on the unknown
     assert kpis["blind"]["summary_score"] < kpis["names_a_mode"]["summary_score"] < kpis["says_unknown"][
         "summary_score"]
