@@ -20,7 +20,7 @@ FLIGHT_MINUTES = 2.0
 #: Scored fleet of a tiny scenario: units x flights per unit.
 TINY_UNITS, TINY_FLIGHTS = 3, 8
 #: Healthy training fleet of a tiny scenario: units x flights per unit.
-TINY_TRAINING_UNITS, TINY_TRAINING_FLIGHTS = 4, 4
+TINY_TRAINING_UNITS, TINY_TRAINING_FLIGHTS = 4, 6  # half the units fit: 2 x 6 >= the 11 flights of a 10-indicator model
 #: Degradation timing of a tiny scenario's modes (flight indices): onset window and ramp length.
 TINY_ONSET_MIN, TINY_ONSET_MAX, TINY_RAMP_FLIGHTS = 1, 3, 3
 #: Latest onset of the modes in tiny scenario *files* (flight index).
