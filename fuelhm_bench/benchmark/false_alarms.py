@@ -26,8 +26,8 @@ the drifted scored fleet (what the robustness KPIs measure: a drifted healthy
 unit may look abnormal) and on the same fleet without the drift (what the
 calibration controls).
 
-Run it from the command line (about one minute of CPU per scenario with a
-cold cache)::
+Run it from the command line (about two minutes of CPU for a 30-unit scenario with a
+cold cache; measured 2 min on paper_2012)::
 
     python -m fuelhm_bench.benchmark.false_alarms                 # every shipped scenario
     python -m fuelhm_bench.benchmark.false_alarms paper_2012 --a 2
