@@ -47,6 +47,10 @@ EXTENDED_INDICATOR_UNITS: dict[str, str] = {
 #: The paper's ten followed by the extended indicators: every name a table may carry.
 ALL_INDICATOR_NAMES: tuple[str, ...] = INDICATOR_NAMES + EXTENDED_INDICATOR_NAMES
 
+#: True mode of a fault outside the seven modes (a scenario's ``unknown_faults``): detection counts
+#: it, and a method diagnoses it right only by naming no single mode (docs/scoring.md).
+UNKNOWN_MODE: str = "unknown"
+
 #: Optional physical effects a nominal model omits (docs/physics.md §7 Optional effects).
 EFFECT_IDS: tuple[str, ...] = (
     "spool_overlap",

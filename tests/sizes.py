@@ -20,7 +20,7 @@ FLIGHT_MINUTES = 2.0
 #: Scored fleet of a tiny scenario: units x flights per unit.
 TINY_UNITS, TINY_FLIGHTS = 3, 8
 #: Healthy training fleet of a tiny scenario: units x flights per unit.
-TINY_TRAINING_UNITS, TINY_TRAINING_FLIGHTS = 4, 4
+TINY_TRAINING_UNITS, TINY_TRAINING_FLIGHTS = 4, 6  # half the units fit: 2 x 6 >= the 11 flights of a 10-indicator model
 #: Degradation timing of a tiny scenario's modes (flight indices): onset window and ramp length.
 TINY_ONSET_MIN, TINY_ONSET_MAX, TINY_RAMP_FLIGHTS = 1, 3, 3
 #: Latest onset of the modes in tiny scenario *files* (flight index).
@@ -73,10 +73,12 @@ def tiny_scenario(base: str = "paper_2012", name: str = "tiny", **changes):
                   mission=dataclasses.replace(sc.mission, duration_min=FLIGHT_MINUTES),
                   training=dataclasses.replace(sc.training, units=TINY_TRAINING_UNITS,
                                                flights_per_unit=TINY_TRAINING_FLIGHTS),
-                  degradations=degradations)
-    if not sc.simultaneous:
+                  degradations=degradations,
+                  unknown_faults=tuple(dataclasses.replace(u, onset_min=TINY_ONSET_MIN, onset_max=TINY_ONSET_MAX)
+                                       for u in sc.unknown_faults))
+    if not sc.simultaneous:  # every unit has a mode, so none could develop a fault outside the seven
         n = len(degradations)
-        fields.update(healthy_probability=0.0,
+        fields.update(healthy_probability=0.0, unknown_faults=(),
                       degradations=tuple(dataclasses.replace(d, probability=1.0 / n) for d in degradations))
     fields.update(changes)
     return dataclasses.replace(sc, **fields)
@@ -91,8 +93,11 @@ def tiny_scenario_data(data: dict) -> dict:
     data["training"]["flights_per_unit"] = TINY_TRAINING_FLIGHTS
     for d in data["degradations"]:
         d["onset_min"], d["onset_max"], d["ramp_flights"] = TINY_ONSET_MIN, TINY_FILE_ONSET_MAX, TINY_RAMP_FLIGHTS
+    for u in data.get("unknown_faults") or ():
+        u["onset_min"], u["onset_max"] = TINY_ONSET_MIN, TINY_FILE_ONSET_MAX
     if data.get("simultaneous") is False:
         data["healthy_probability"] = 0.0
+        data["unknown_faults"] = []  # every unit has a mode, so none could develop a fault outside the seven
         for d in data["degradations"]:
             d["probability"] = 1.0 / len(data["degradations"])
     return data

@@ -538,11 +538,11 @@ def test_leave_one_unit_out_accounts_for_unit_dispersion(world):
 # ----------------------------------------------------------------------------- scarce healthy data
 def _low_data_fit_table(data: CheckData) -> pd.DataFrame:
     """Healthy flights shaped like the shipped low_data scenario's fit part (its units minus the
-    calibration quarter, its flights per unit), drawn from the check data's healthy table."""
+    calibration half, its flights per unit), drawn from the check data's healthy table."""
     from fuelhm_bench.scenarios import load_scenario
 
     training = load_scenario("low_data").training
-    n_fit_units = training.units - max(1, round(0.25 * training.units))
+    n_fit_units = training.units - max(1, training.units // 2)
     units = list(dict.fromkeys(data.healthy["unit_id"]))[:n_fit_units]
     table = data.healthy[data.healthy["unit_id"].isin(units)]
     table = table[table["flight_index"] < training.flights_per_unit].reset_index(drop=True)

@@ -29,9 +29,10 @@ def _small(name: str):
     if training.units * training.flights_per_unit > 24:  # keep small training sets (low_data) as shipped
         training = dataclasses.replace(training, units=4, flights_per_unit=6)
     degradations = tuple(dataclasses.replace(d, onset_min=1, onset_max=3, ramp_flights=3) for d in sc.degradations)
+    unknown = tuple(dataclasses.replace(u, onset_min=1, onset_max=3) for u in sc.unknown_faults)
     return dataclasses.replace(sc, fleet=dataclasses.replace(sc.fleet, units=2, flights_per_unit=8),
                                mission=dataclasses.replace(sc.mission, duration_min=2.0), training=training,
-                               degradations=degradations)
+                               degradations=degradations, unknown_faults=unknown)
 
 
 @pytest.fixture(scope="module")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import collections
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from fuelhm_bench.flights.fleet import build_units
@@ -28,26 +30,75 @@ def test_all_modes_has_at_least_15_faulty_units_per_mode():
 SCARCE_DATA = ("low_data",)
 
 
+def _unit_table(n_units, flights, rng, *, within=0.3):
+    """Healthy indicator rows dominated by a per-unit offset (manufacturing dispersion), as on the physics."""
+    from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+    offsets = rng.normal(size=(n_units, len(INDICATOR_NAMES)))
+    values = np.repeat(offsets, flights, axis=0) + within * rng.normal(size=(n_units * flights, len(INDICATOR_NAMES)))
+    table = pd.DataFrame(values, columns=list(INDICATOR_NAMES))
+    table.insert(0, "flight_index", np.tile(np.arange(flights), n_units))
+    table.insert(0, "unit_id", np.repeat(np.arange(n_units), flights))
+    table.insert(0, "flight_id", np.arange(n_units * flights))
+    for name in INDICATOR_NAMES:
+        table[f"{name}_valid"] = True
+    return table
+
+
+def test_split_training_holds_out_half_the_units():
+    from fuelhm_bench.benchmark.harness import split_training
+
+    table = _unit_table(9, 2, np.random.default_rng(0))
+    fit, cal = split_training(table)
+    assert set(cal["unit_id"]) == {5, 6, 7, 8} and set(fit["unit_id"]) == {0, 1, 2, 3, 4}
+    fit1, cal1 = split_training(table[table["unit_id"] < 3])  # low_data's 3 units: 2 fit, 1 calibrates
+    assert set(cal1["unit_id"]) == {2} and set(fit1["unit_id"]) == {0, 1}
+
+
+def test_many_calibration_units_put_the_false_alarm_rate_near_the_gaussian_tail():
+    """The calibration mechanism on rows whose spread is mostly between units: fit the paper method on the
+    fit half, threshold mu + 2 sigma of the held-out half's scores, rate on 2000 new units. With the shipped
+    training fleets' shape (200 units x 2 flights) the rate is within 1.5 points of 2.3 %; with 20 units x 10
+    flights (the v2 fleets, the same 200 flights) it is not, because its 5 calibration units are 5 draws of
+    the unit offset (measured with this seed: 2.5 % and 4.1 %)."""
+    from fuelhm_baselines.paper_mahalanobis import PaperMahalanobis
+    from fuelhm_bench.benchmark.harness import split_training
+    from fuelhm_bench.methods import run_table
+    from fuelhm_bench.scoring import fit_healthy_model
+
+    rng = np.random.default_rng(11)
+    new_units = _unit_table(2000, 1, rng)
+    rates = {}
+    for units, flights in ((200, 2), (20, 10)):
+        fit, cal = split_training(_unit_table(units, flights, rng))
+        # cv=None: the method's own threshold is not under test, the scorer's mu + A sigma of ``cal`` is
+        method = PaperMahalanobis(a=2.0, cv=None).fit(fit, random_state=0)
+        threshold = fit_healthy_model(run_table(method, cal)["score"]).threshold(2.0)
+        # the method's score of a flight (window 1) is its healthy model's Mahalanobis distance
+        scores = method.healthy_model_.global_score(new_units)
+        rates[units] = float(np.mean(scores > threshold))
+    assert abs(rates[200] - GAUSSIAN_FAR_A2) <= FAR_TOLERANCE, rates
+    assert abs(rates[20] - GAUSSIAN_FAR_A2) > FAR_TOLERANCE, rates
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [n for n in list_scenarios() if n not in SCARCE_DATA])
 def test_healthy_false_alarm_rate_at_a2_is_gaussian(name):
-    """The paper method's threshold mu + 2 sigma, set on the calibration split of the healthy training
-    flights, gives a healthy false-alarm rate within 1.5 points of 2.3 % on the scored fleet (full size).
+    """The paper method's threshold mu + 2 sigma, set on the calibration half of the healthy training units,
+    gives a healthy false-alarm rate within 1.5 points of 2.3 % on new healthy units of the scored fleet's
+    model (300 units x 2 flights; without the drift for robustness_drift, whose drifted healthy units are
+    meant to look abnormal), and the scored fleet's own rate is consistent with it: its 95 % unit-bootstrap
+    interval contains 2.3 %. The scored fleet's 30 units alone cannot pin the rate to 1.5 points (their
+    sampling spread is about 1.5 points for a perfect threshold): python -m fuelhm_bench.benchmark.false_alarms
+    prints both for every scenario.
 
-    Measured on paper_2012 with the release physics (training units x flights, calibration flights):
-    5.86 % (20 x 10, 50), 4.05 % (40 x 10, 100), 5.41 % (60 x 10, 150), 9.23 % (80 x 5, 100). Not monotone
-    in the calibration size: the scored fleet's healthy flights cluster in 30 units (8 healthy), so the
-    measured rate carries unit-level sampling noise of several points; this test fails on paper_2012
-    with the release physics."""
-    from fuelhm_baselines.paper_mahalanobis import PaperMahalanobis
-    from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
-    from fuelhm_bench.datasets.cache import KnowledgeSize
-    from fuelhm_bench.scoring import headline_kpis
+    Before (v2 fleets, 20 units x 10 flights, a quarter calibrating): 7.66 % on paper_2012's scored fleet
+    (95 % interval 3.2-14.5 %) with 5 calibration units."""
+    from fuelhm_bench.benchmark.false_alarms import KNOWLEDGE_SIZE, healthy_false_alarm_rate
 
-    evaluation = prepare_evaluation(name, fidelity="physics", robustness=False,
-                                    knowledge_size=KnowledgeSize(doe_units=2))
-    outcome = run_in_env(PaperMahalanobis(a=2.0), evaluation, random_state=0, timeout_s=3000)
-    assert outcome.ok, outcome.message
-    card = outcome.score()
-    far = headline_kpis(card)["fpr_standard_thr"]
-    assert abs(far - GAUSSIAN_FAR_A2) <= FAR_TOLERANCE, f"{name}: healthy false-alarm rate at A=2 is {far:.4f}"
+    rates = healthy_false_alarm_rate(name, a=2.0, knowledge_size=KNOWLEDGE_SIZE)
+    calibrated = [r for r in rates if not r.drifted]
+    assert len(calibrated) == 1
+    (r,) = calibrated
+    assert abs(r.population_rate - GAUSSIAN_FAR_A2) <= FAR_TOLERANCE, r
+    assert r.ci_low <= GAUSSIAN_FAR_A2 <= r.ci_high, r

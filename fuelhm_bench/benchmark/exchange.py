@@ -147,7 +147,9 @@ def _surrogate_tables(sc, n_units, flight_minutes, cache_dir,
             lab[f"intensity_{m}"] = truth["intensity"][:, j]
             lab[f"max_intensity_{m}"] = truth["max_intensity"][j]
             lab[f"onset_{m}"] = truth["onset"][j]
-        lab_parts.append(pd.DataFrame(lab, columns=list(LABEL_COLUMNS)))
+        lab["unknown_fault"] = truth.get("unknown_fault", "")  # a fault outside the seven modes ("" none)
+        lab["onset_unknown"] = truth.get("unknown_onset", -1)
+        lab_parts.append(pd.DataFrame(lab, columns=[*LABEL_COLUMNS, "unknown_fault", "onset_unknown"]))
     return pd.DataFrame(ind_rows), pd.concat(lab_parts, ignore_index=True)
 
 

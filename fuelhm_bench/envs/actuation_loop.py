@@ -253,7 +253,9 @@ class ActuationLoopEnv(gym.Env):
     in that step's ``info["episode_truth"]``: ``unit_id``, ``flight_index``
     (n,), ``intensity`` (n, 7, flown, after repairs), ``max_intensity`` (7,),
     ``onset`` (7,; -1 for absent modes), ``detectable``, ``failure``,
-    ``repaired`` (n,) and ``cost_kusd`` (n,). With
+    ``repaired`` (n,), ``cost_kusd`` (n,), ``unknown_fault`` (the effect id of
+    the unit's fault outside the seven modes, "" without one; it is never
+    repaired and does not enter the rewards) and ``unknown_onset`` (-1 without). With
     ``reset(options={"evaluation": True})`` every ``info`` also carries
     ``"truth"`` for the flight in the observation (``intensity``,
     ``max_intensity``, ``onset``, ``detectable``, ``failure``) and every step's
@@ -377,6 +379,10 @@ class ActuationLoopEnv(gym.Env):
         self._c_false, self._c_repair = float(costs.false_alarm_kusd), float(costs.repair_kusd)
         self._c_undetected, self._c_failure = float(costs.undetected_flight_kusd), float(costs.failure_kusd)
         self.surrogate = None
+        if fidelity == "surrogate" and sc.unknown_faults:
+            raise ParameterError(f"{owner}: scenario {sc.id} has faults outside the seven modes (unknown_faults: "
+                                 f"{', '.join(u.effect for u in sc.unknown_faults)}), which the surrogate cannot "
+                                 f"draw (it knows the seven modes' responses only). Use fidelity='physics'.")
         if fidelity == "surrogate":
             if knowledge is None:
                 knowledge = surrogate_knowledge(sc, flight_minutes=self.flight_minutes, size=size,
@@ -571,6 +577,8 @@ class ActuationLoopEnv(gym.Env):
                            if active >> MODE_IDS.index(s.mode) & 1 else 0.0)
                   for s in self._schedule.schedules}
         model = self._model.degraded(intens)
+        for effect in self._schedule.effects(t):  # a fault outside the seven modes (never repaired)
+            model = model.with_effect(effect)
         inputs = self._config.mission.sample(mission_rng(self._seed, self._slot, t))
         noise = noise_rng(self._seed, self._slot, t)
         where = f"unit {self._unit_id}, flight {t}" if self._unit_id >= 0 else f"drawn unit, flight {t}"
@@ -793,6 +801,8 @@ class ActuationLoopEnv(gym.Env):
             "failure": np.array([f != 0 for f in self._fail_log]),
             "repaired": np.array([r != 0 for r in self._repair_log]),
             "cost_kusd": np.array(self._cost_log, dtype=np.float64),
+            "unknown_fault": "" if self._schedule.unknown is None else self._schedule.unknown.effect,
+            "unknown_onset": int(self._schedule.unknown_onset),
         }
 
     def render(self) -> None:

@@ -17,12 +17,12 @@ import pandas as pd
 
 from fuelhm_bench.errors import ParameterError, range_error
 from fuelhm_bench.flights.mission import PHASE_NAMES, MissionProfile
-from fuelhm_bench.flights.schedule import ModeSchedule, UnitSchedule, draw_unit_schedule
+from fuelhm_bench.flights.schedule import ModeSchedule, UnitSchedule, UnknownFault, draw_unit_schedule, draw_unknown_fault
 from fuelhm_bench.physics.model import Dispersion, LoopModel, manufacture
 from fuelhm_bench.physics.simulate import FlightInputs, SimOutput, simulate
 from fuelhm_bench.taxonomy import MODE_IDS
 
-_STREAM_UNIT, _STREAM_MISSION, _STREAM_NOISE = 0, 1, 2
+_STREAM_UNIT, _STREAM_MISSION, _STREAM_NOISE, _STREAM_UNKNOWN = 0, 1, 2, 3
 
 
 def rng_for(seed: int, stream: int, *keys: int) -> np.random.Generator:
@@ -67,6 +67,10 @@ class FleetConfig:
         Whether several modes may act in one unit.
     seed : int, default=0
         Master seed.
+    unknown_faults : tuple of UnknownFault, default=()
+        Faults outside the seven modes: a unit that drew no degradation mode
+        develops at most one (drawn from its own stream, so the units' modes,
+        onsets and manufacturing are those of the same fleet without them).
     """
 
     n_units: int = 2
@@ -77,6 +81,7 @@ class FleetConfig:
     schedules: tuple = ()
     simultaneous: bool = True
     seed: int = 0
+    unknown_faults: tuple = ()
 
     def __post_init__(self) -> None:
         for name in ("n_units", "n_flights"):
@@ -92,6 +97,9 @@ class FleetConfig:
         for s in self.schedules:
             if not isinstance(s, ModeSchedule):
                 raise range_error("FleetConfig.schedules", "a tuple of ModeSchedule", s)
+        for f in self.unknown_faults:
+            if not isinstance(f, UnknownFault):
+                raise range_error("FleetConfig.unknown_faults", "a tuple of UnknownFault", f)
 
 
 @dataclass(frozen=True)
@@ -133,6 +141,9 @@ def _build_unit(config: FleetConfig, u: int) -> Unit:
     rng = unit_rng(config.seed, u)
     model = manufacture(config.nominal, rng, config.dispersion)
     sched = draw_unit_schedule(config.schedules, rng, simultaneous=config.simultaneous)
+    if config.unknown_faults and not sched.schedules:
+        fault, onset = draw_unknown_fault(config.unknown_faults, rng_for(config.seed, _STREAM_UNKNOWN, u))
+        sched = UnitSchedule(unknown=fault, unknown_onset=onset)
     return Unit(u, model, sched)
 
 
@@ -181,7 +192,10 @@ def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None, st
         for unit, f in chunk:
             it = unit.schedule.intensities(f)
             intens.append(it)
-            models.append(unit.model.degraded(it))
+            model = unit.model.degraded(it)
+            for effect in unit.schedule.effects(f):  # a fault outside the seven modes
+                model = model.with_effect(effect)
+            models.append(model)
             inputs.append(config.mission.sample(mission_rng(config.seed, unit.unit_id, f)))
             rngs.append(noise_rng(config.seed, unit.unit_id, f))
             labels.append(f"unit {unit.unit_id}, flight {f}")
@@ -228,6 +242,9 @@ def labels_frame(flights: list[SimulatedFlight], units: dict[int, Unit], hidden_
             row[f"intensity_{m}"] = float(fl.intensities.get(m, 0.0))
             row[f"max_intensity_{m}"] = unit.schedule.max_intensity_of(m)
             row[f"onset_{m}"] = unit.schedule.onset_of(m)
+        unknown = unit.schedule.unknown
+        row["unknown_fault"] = "" if unknown is None else unknown.effect
+        row["onset_unknown"] = unit.schedule.unknown_onset
         row["hidden_effects"] = hidden_effects
         rows.append(row)
     return pd.DataFrame(rows)

@@ -14,6 +14,14 @@ Growth laws, with ``k = flight - onset`` (``k < 0``: intensity 0):
 * ``exponential``: ``f = f_max * min(1, exp((k + 1 - ramp_flights) / tau))`` with
   ``tau = ramp_flights / 5`` — an incipient fault that accelerates and reaches
   ``f_max`` after ``ramp_flights`` flights (starting from ``f_max * e^-5``).
+
+**Faults outside the library.** An :class:`UnknownFault` is a physical effect of
+:mod:`fuelhm_bench.physics.effects` (not one of the seven modes) that a unit
+acquires at an onset flight and keeps (step: the effect with its parameters is
+switched on from the onset). A unit that drew no degradation mode develops at
+most one of them (:func:`draw_unknown_fault`); its labels name the effect, and
+the scorer counts its flights as faulty with the true mode ``"unknown"``
+(docs/scoring.md).
 """
 
 from __future__ import annotations
@@ -27,9 +35,12 @@ import numpy as np
 from fuelhm_bench.errors import range_error
 from fuelhm_bench.physics._validation import check_fields
 from fuelhm_bench.physics.degradations import validate_intensities
-from fuelhm_bench.taxonomy import MODE_IDS
+from fuelhm_bench.taxonomy import MODE_IDS, UNKNOWN_MODE
 
 GROWTH_LAWS = ("step", "linear", "exponential")
+
+#: ``true_mode`` of a flight whose only fault is outside the seven modes (an :class:`UnknownFault`).
+UNKNOWN = UNKNOWN_MODE
 
 
 @dataclass(frozen=True)
@@ -87,6 +98,65 @@ class ModeSchedule:
 
 
 @dataclass(frozen=True)
+class UnknownFault:
+    """A fault outside the seven modes: an optional physical effect switched on at an onset flight.
+
+    Parameters
+    ----------
+    effect : str
+        One of :data:`~fuelhm_bench.taxonomy.EFFECT_IDS` (docs/physics.md §7).
+    probability : float, default=1.0
+        Probability that a unit without any degradation mode develops it, in [0, 1].
+    onset_min, onset_max : int, default=0, 0
+        Onset flight drawn uniformly in ``[onset_min, onset_max]`` (0-based).
+    parameters : tuple of (str, float), default=()
+        Parameter overrides of the effect (SI units as in their names); the
+        others take the effect's defaults.
+    """
+
+    effect: str
+    probability: float = 1.0
+    onset_min: int = 0
+    onset_max: int = 0
+    parameters: tuple = ()
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"probability": (0.0, 1.0, True)})
+        for name in ("onset_min", "onset_max"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+                raise range_error(f"UnknownFault.{name}", "an integer >= 0", v)
+        if self.onset_max < self.onset_min:
+            raise range_error("UnknownFault.onset_max", f">= onset_min ({self.onset_min})", self.onset_max)
+        self.build()  # an unknown effect id or a parameter out of range fails here, naming it
+
+    def build(self):
+        """The effect instance (:func:`fuelhm_bench.physics.effects.make_effect`)."""
+        from fuelhm_bench.physics.effects import make_effect
+
+        return make_effect(self.effect, **dict(self.parameters))
+
+
+def draw_unknown_fault(faults: Sequence[UnknownFault], rng: np.random.Generator) -> tuple[UnknownFault | None, int]:
+    """Draw at most one fault outside the library for a unit: ``(fault, onset)`` or ``(None, -1)``.
+
+    Fault ``k`` is chosen with probability ``faults[k].probability`` (the
+    probabilities sum to at most 1; the remainder keeps the unit healthy).
+    Nothing is drawn from ``rng`` when ``faults`` is empty.
+    """
+    if not faults:
+        return None, -1
+    p = np.array([f.probability for f in faults], dtype=float)
+    if p.sum() > 1.0 + 1e-9:
+        raise range_error("unknown fault probabilities", "summing to <= 1", round(float(p.sum()), 6))
+    idx = int(np.searchsorted(np.cumsum(p), rng.random(), side="right"))
+    if idx >= len(faults):
+        return None, -1
+    fault = faults[idx]
+    return fault, int(rng.integers(fault.onset_min, fault.onset_max + 1))
+
+
+@dataclass(frozen=True)
 class UnitSchedule:
     """The realised degradation history of one unit.
 
@@ -96,10 +166,22 @@ class UnitSchedule:
         The mode schedules that occur in this unit.
     onsets : tuple of int
         Onset flight of each, aligned with ``schedules``.
+    unknown : UnknownFault or None, default=None
+        The fault outside the seven modes this unit develops, if any.
+    unknown_onset : int, default=-1
+        Its onset flight (-1 without one).
     """
 
     schedules: tuple = ()
     onsets: tuple = ()
+    unknown: UnknownFault | None = None
+    unknown_onset: int = -1
+
+    def effects(self, flight: int) -> tuple:
+        """Effects of the unknown fault active at a flight index (empty before its onset or without one)."""
+        if self.unknown is None or flight < self.unknown_onset:
+            return ()
+        return (self.unknown.build(),)
 
     def intensities(self, flight: int) -> dict[str, float]:
         """``{mode: intensity}`` at a flight index (modes absent from the unit omitted)."""

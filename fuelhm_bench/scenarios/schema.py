@@ -54,7 +54,7 @@ import numpy as np
 from fuelhm_bench.errors import FuelHMError, ParameterError, ScenarioError
 from fuelhm_bench.flights.fleet import FleetConfig
 from fuelhm_bench.flights.mission import MissionProfile
-from fuelhm_bench.flights.schedule import GROWTH_LAWS, ModeSchedule
+from fuelhm_bench.flights.schedule import GROWTH_LAWS, ModeSchedule, UnknownFault
 from fuelhm_bench.physics.degradations import LAWS
 from fuelhm_bench.physics.effects import EFFECTS, make_effect
 from fuelhm_bench.physics.lvdt import LvdtParams
@@ -450,6 +450,46 @@ class HiddenEffectSpec(Spec):
 
 
 @dataclass(frozen=True, kw_only=True)
+class UnknownFaultSpec(HiddenEffectSpec):
+    """A fault outside the seven modes: an optional physical effect a scored unit acquires at an onset flight.
+
+    Methods are told neither that it exists nor what it does. A scored unit
+    that drew no degradation mode develops at most one unknown fault; its
+    flights from the onset on are faulty with the true mode "unknown"
+    (detection counts them; no mode of the library is the right diagnosis).
+
+    Parameters
+    ----------
+    effect : str
+        Effect id (docs/physics.md §7 Optional effects); not one of hidden_effects.
+    parameters : mapping of str to float, default={}
+        Parameter overrides of the effect, SI units as in the parameter names
+        (e.g. width_a for torque_motor_hysteresis); omitted ones take the effect's defaults.
+    probability : float
+        Probability that a scored unit without any degradation mode develops
+        this fault, in [0, 1]; the unknown faults' probabilities sum to at most 1.
+    onset_min : int
+        Earliest onset flight (0-based index), >= 0.
+    onset_max : int
+        Latest onset flight (0-based), in [onset_min, flights_per_unit - 1]; the
+        effect stays on from the onset to the unit's last flight.
+    """
+
+    probability: float = option(ge=0.0, le=1.0)
+    onset_min: int = option(ge=0)
+    onset_max: int = option(ge=0)
+
+    def _checks(self) -> Iterable[Problem]:
+        yield from super()._checks()
+        if self.onset_max < self.onset_min:
+            yield Problem("onset_max", f">= onset_min ({self.onset_min})", show(self.onset_max))
+
+    def schedule(self) -> UnknownFault:
+        """The simulator's :class:`~fuelhm_bench.flights.schedule.UnknownFault`."""
+        return UnknownFault(self.effect, self.probability, self.onset_min, self.onset_max, tuple(self.parameters))
+
+
+@dataclass(frozen=True, kw_only=True)
 class DriftSpec(Spec):
     """A change of one nominal model parameter in the scored fleet (robustness).
 
@@ -632,6 +672,10 @@ class Scenario(Spec):
     drift : list of DriftSpec, default=[]
         Nominal-parameter changes applied to the scored fleet only, in order
         (each parameter at most once).
+    unknown_faults : list of UnknownFaultSpec, default=[]
+        Faults outside the seven modes in the scored fleet (each effect at
+        most once, none of hidden_effects): a unit without any degradation mode
+        develops at most one; scored as faulty with the true mode "unknown".
     training : TrainingSpec
         The healthy training set (units and flights per unit).
     seeds : SeedSpec
@@ -653,7 +697,7 @@ class Scenario(Spec):
     >>> from fuelhm_bench.scenarios import load_scenario
     >>> s = load_scenario("paper_2012")
     >>> s.id
-    'paper_2012-v2'
+    'paper_2012-v3'
     >>> s.test_fleet_config().n_units == s.fleet.units
     True
     """
@@ -671,6 +715,7 @@ class Scenario(Spec):
     degradations: tuple[DegradationSpec, ...] = option(())
     hidden_effects: tuple[HiddenEffectSpec, ...] = option(())
     drift: tuple[DriftSpec, ...] = option(())
+    unknown_faults: tuple[UnknownFaultSpec, ...] = option(())
     training: TrainingSpec = option()
     seeds: SeedSpec = option()
     fidelity: str = option("physics", choices=FIDELITIES)
@@ -733,7 +778,8 @@ class Scenario(Spec):
         return FleetConfig(n_units=self.fleet.units, n_flights=self.fleet.flights_per_unit,
                            mission=self.mission_profile(), nominal=self.drifted_model(), dispersion=self.dispersion(),
                            schedules=self.mode_schedules(), simultaneous=self.simultaneous,
-                           seed=self.seeds.test_seed)
+                           seed=self.seeds.test_seed,
+                           unknown_faults=tuple(u.schedule() for u in self.unknown_faults))
 
     # ------------------------------------------------------------------ checks
     def run_cost(self) -> RunCost:
@@ -840,6 +886,30 @@ class Scenario(Spec):
                 yield Problem(f"hidden_effects[{i}].effect", f"an effect not already enabled (hidden_effects"
                                                              f"[{seen[e.effect]}] is {e.effect})", show(e.effect))
             seen.setdefault(e.effect, i)
+        last = self.fleet.flights_per_unit - 1
+        mine: dict[str, int] = {}
+        for i, u in enumerate(self.unknown_faults):
+            where = f"unknown_faults[{i}]"
+            if u.effect in seen:
+                yield Problem(f"{where}.effect", f"an effect outside hidden_effects (hidden_effects[{seen[u.effect]}] "
+                                                 f"is {u.effect}: every unit already has it)", show(u.effect))
+            elif u.effect in mine:
+                yield Problem(f"{where}.effect", f"an effect not already scheduled (unknown_faults[{mine[u.effect]}] "
+                                                 f"is {u.effect})", show(u.effect))
+            mine.setdefault(u.effect, i)
+            if u.onset_min > last:
+                yield Problem(f"{where}.onset_min", f"<= the last flight index, flights_per_unit - 1 = {last} "
+                                                    f"(onsets are 0-based)", show(u.onset_min))
+            elif u.onset_max > last:
+                yield Problem(f"{where}.onset_max", f"<= the last flight index, flights_per_unit - 1 = {last} "
+                                                    f"(onsets are 0-based)", show(u.onset_max))
+        total = math.fsum(u.probability for u in self.unknown_faults)
+        if total > 1.0 + 1e-9:
+            terms = " + ".join(f"unknown_faults[{i}].probability = {u.probability:g}"
+                               for i, u in enumerate(self.unknown_faults))
+            yield Problem(f"unknown_faults[{len(self.unknown_faults) - 1}].probability",
+                          f"such that the unknown faults' probabilities sum to at most 1 ({terms} = {total:g})",
+                          show(self.unknown_faults[-1].probability))
 
     def _drift_checks(self) -> list[Problem]:
         problems: list[Problem] = []

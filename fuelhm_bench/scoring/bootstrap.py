@@ -31,7 +31,7 @@ import pandas as pd
 
 from fuelhm_bench.errors import ParameterError
 from fuelhm_bench.scoring.config import ScoringConfig
-from fuelhm_bench.scoring.run import HEALTHY
+from fuelhm_bench.scoring.run import HEALTHY, TIE, UNKNOWN
 from fuelhm_bench.scoring.thresholds import HealthyScoreModel
 from fuelhm_bench.taxonomy import MODE_IDS
 
@@ -51,11 +51,12 @@ def _unit_counts(flights: pd.DataFrame, threshold: float) -> tuple[np.ndarray, l
     healthy = true_mode == HEALTHY
     det = flights["detectable"].to_numpy(dtype=bool)
     single = np.isin(true_mode, MODE_IDS)
-    correct = flights["predicted"].to_numpy() == true_mode
+    predicted = flights["predicted"].to_numpy()
+    correct = (predicted == true_mode) | ((true_mode == UNKNOWN) & (predicted == TIE))
     cols = {"healthy": healthy, "fp_alarm": healthy & alarm, "fp_thr": healthy & thr,
             "det": det, "fn_alarm": det & ~alarm, "fn_thr": det & ~thr,
             "cls_alarmed": single & alarm, "cls_wrong": single & alarm & ~correct}
-    for m in MODE_IDS:
+    for m in (*MODE_IDS, UNKNOWN):
         member = det & (true_mode == m)
         cols[f"n_{m}"] = member
         cols[f"tp_{m}"] = member & alarm
@@ -81,7 +82,7 @@ def _kpis(c: dict[str, np.ndarray], w: float) -> dict[str, np.ndarray]:
                                                 + out[f"fnr_standard_{op}"]) / 2.0
     fpr = np.where(c["healthy"] > 0, ratio(c["fp_alarm"], c["healthy"]), 0.0)
     terms, present = [], []
-    for m in MODE_IDS:
+    for m in (*MODE_IDS, UNKNOWN):
         n = c[f"n_{m}"]
         tpr = ratio(c[f"tp_{m}"], n)
         acc = np.where(c[f"tp_{m}"] > 0, ratio(c[f"ok_{m}"], c[f"tp_{m}"]), 0.0)

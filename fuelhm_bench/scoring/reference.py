@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
-from fuelhm_bench.scoring.run import INTENSITY_COLUMNS
+from fuelhm_bench.scoring.run import INTENSITY_COLUMNS, UNKNOWN_ONSET_COLUMN
 
 __all__ = ["null_decisions", "perfect_decisions"]
 
@@ -28,14 +28,23 @@ def perfect_decisions(labels: pd.DataFrame) -> pd.DataFrame:
     -------
     pandas.DataFrame
         Decisions table: ``score`` = largest intensity (0 when healthy), ``alarm``
-        = any intensity > 0, guilt shared equally among the active modes.
+        = any intensity > 0, guilt shared equally among the active modes. A
+        flight whose only fault is outside the seven modes (``onset_unknown``
+        reached) is alarmed with score 1 and uniform guilt: no mode is named.
     """
     inten = labels[list(INTENSITY_COLUMNS)].to_numpy(dtype=float)
     active = inten > 0
     alarm = active.any(axis=1)
     guilt = np.where(alarm[:, None], active / np.maximum(active.sum(axis=1, keepdims=True), 1),
                      0.0)
-    return _frame(labels, inten.max(axis=1), alarm, guilt)
+    score = inten.max(axis=1)
+    if UNKNOWN_ONSET_COLUMN in labels.columns:
+        onset = labels[UNKNOWN_ONSET_COLUMN].to_numpy(dtype=float)
+        unknown = (onset >= 0) & (labels["flight_index"].to_numpy() >= onset) & ~alarm
+        guilt[unknown] = 1.0 / guilt.shape[1]
+        score = np.where(unknown, 1.0, score)
+        alarm = alarm | unknown
+    return _frame(labels, score, alarm, guilt)
 
 
 def null_decisions(labels: pd.DataFrame) -> pd.DataFrame:

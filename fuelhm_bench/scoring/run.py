@@ -12,10 +12,10 @@ from fuelhm_bench.errors import DataFormatError
 from fuelhm_bench.methods.decision import GUILT_SUM_TOLERANCE
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
 from fuelhm_bench.scoring.config import ScoringConfig
-from fuelhm_bench.taxonomy import MODE_IDS
+from fuelhm_bench.taxonomy import MODE_IDS, UNKNOWN_MODE
 
-__all__ = ["HEALTHY", "INTENSITY_COLUMNS", "LABEL_COLUMNS", "MULTIPLE", "NO_ALARM", "Run", "TIE",
-           "flight_table"]
+__all__ = ["HEALTHY", "INTENSITY_COLUMNS", "LABEL_COLUMNS", "MULTIPLE", "NO_ALARM", "Run", "TIE", "UNKNOWN",
+           "UNKNOWN_ONSET_COLUMN", "flight_table"]
 
 INTENSITY_COLUMNS: tuple[str, ...] = tuple(f"intensity_{m}" for m in MODE_IDS)
 MAX_INTENSITY_COLUMNS: tuple[str, ...] = tuple(f"max_intensity_{m}" for m in MODE_IDS)
@@ -30,6 +30,11 @@ LABEL_COLUMNS: tuple[str, ...] = ("unit_id", "flight_index", *INTENSITY_COLUMNS,
 HEALTHY = "healthy"
 #: ``true_mode`` of a flight with several active degradations.
 MULTIPLE = "multiple"
+#: ``true_mode`` of a flight whose only fault is outside the seven modes (optional label columns
+#: ``unknown_fault``, the effect id, and ``onset_unknown``, its onset flight or -1).
+UNKNOWN = UNKNOWN_MODE
+#: Optional label column: onset flight of the unit's fault outside the seven modes (-1: none).
+UNKNOWN_ONSET_COLUMN = "onset_unknown"
 #: ``predicted`` of a flight without alarm.
 NO_ALARM = "no_alarm"
 #: ``predicted`` of an alarmed flight whose largest guilt is shared by several modes.
@@ -193,7 +198,9 @@ def flight_table(run: Run, config: ScoringConfig | None = None) -> pd.DataFrame:
             Keys.
         ``true_mode``
             ``"healthy"`` (all intensities 0), the mode id of the single active
-            degradation, or ``"multiple"``.
+            degradation, ``"unknown"`` (the only fault is outside the seven
+            modes: labels with ``onset_unknown`` >= 0, from that flight on;
+            fraction 1) or ``"multiple"``.
         ``fraction``
             Intensity / reference maximal intensity of the active mode (the
             largest fraction for ``"multiple"``, 0 for healthy flights).
@@ -215,7 +222,8 @@ def flight_table(run: Run, config: ScoringConfig | None = None) -> pd.DataFrame:
     """
     config = ScoringConfig() if config is None else config
     labels = run.labels.sort_values(_KEYS, kind="stable")
-    merged = labels[[*LABEL_COLUMNS]].merge(run.decisions[list(DECISION_COLUMNS)], on=_KEYS,
+    extra = [UNKNOWN_ONSET_COLUMN] if UNKNOWN_ONSET_COLUMN in labels.columns else []
+    merged = labels[[*LABEL_COLUMNS, *extra]].merge(run.decisions[list(DECISION_COLUMNS)], on=_KEYS,
                                             how="left", validate="one_to_one")
     inten = merged[list(INTENSITY_COLUMNS)].to_numpy(dtype=float)
     ref = _reference_max(merged, config)
@@ -236,6 +244,12 @@ def flight_table(run: Run, config: ScoringConfig | None = None) -> pd.DataFrame:
     mode_names = np.array(MODE_IDS, dtype=object)
     true_mode = np.where(n_active == 0, HEALTHY,
                          np.where(n_active == 1, mode_names[frac.argmax(axis=1)], MULTIPLE))
+    if extra:  # a fault outside the seven modes: at full "intensity" from its onset (a step)
+        onset_u = merged[UNKNOWN_ONSET_COLUMN].to_numpy(dtype=float)
+        unknown = (onset_u >= 0) & (merged["flight_index"].to_numpy() >= onset_u)
+        true_mode = np.where(unknown, np.where(n_active == 0, UNKNOWN, MULTIPLE), true_mode)
+        fraction = np.where(unknown, 1.0, fraction)
+        n_active = n_active + unknown
     band_idx = np.searchsorted(np.array(config.band_edges), fraction, side="left")
     band = np.where(n_active == 0, HEALTHY, np.array(config.band_names, dtype=object)[band_idx])
     faulty = n_active > 0

@@ -1,7 +1,9 @@
 """A normalised summary score (NAB practice): null method = 0, perfect method = 100.
 
 At the method's own operating point (its ``alarm``), for every mode ``m``
-with at least one detectable single-fault flight:
+with at least one detectable single-fault flight (``"unknown"``, a fault
+outside the seven modes, counts as one more mode, whose diagnosis is right
+when the method names no single mode: a tie of the largest guilt):
 
 * ``TPR_m`` = alarmed / detectable flights of mode ``m``;
 * ``FPR``   = alarmed / healthy flights (shared by all modes; taken as 0, with
@@ -26,7 +28,7 @@ from __future__ import annotations
 import pandas as pd
 
 from fuelhm_bench.scoring.config import ScoringConfig
-from fuelhm_bench.scoring.run import HEALTHY
+from fuelhm_bench.scoring.run import HEALTHY, TIE, UNKNOWN
 from fuelhm_bench.taxonomy import MODE_IDS
 
 __all__ = ["summary_components", "summary_score"]
@@ -57,7 +59,10 @@ def summary_components(flights: pd.DataFrame,
     correct = alarm & (flights["predicted"].to_numpy() == true_mode)
     det = flights["detectable"].to_numpy(dtype=bool)
     rows = []
-    for mode in MODE_IDS:
+    # A fault outside the seven modes is diagnosed right only by naming no single mode (a tie, e.g.
+    # uniform guilt): naming one of the seven is wrong, so a library-only classifier gets no credit.
+    correct = correct | (alarm & (true_mode == UNKNOWN) & (flights["predicted"].to_numpy() == TIE))
+    for mode in (*MODE_IDS, UNKNOWN):
         member = det & (true_mode == mode)
         n = int(member.sum())
         if n == 0:

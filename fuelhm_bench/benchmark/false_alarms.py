@@ -1,0 +1,222 @@
+"""Healthy false-alarm rate of the paper's threshold ``mu + A sigma`` on the shipped scenarios.
+
+The scorer's standard threshold (Table V) is ``mu + A sigma`` of a method's
+scores on the *calibration* units of the healthy training fleet
+(:func:`fuelhm_bench.benchmark.harness.split_training`). For a Gaussian
+healthy score, ``A = 2`` gives a false-alarm rate of 2.3 % (one-sided).
+:func:`healthy_false_alarm_rate` runs the paper's method
+(``fuelhm_baselines.paper_mahalanobis:PaperMahalanobis``) through the harness,
+exactly as ``evaluate`` and ``paper`` do, and reports the share of the scored
+fleet's healthy flights (every flight of a healthy unit, and the flights of a
+faulty unit before its first onset) whose score exceeds that threshold, with a
+unit-bootstrap percentile interval (flights of one unit share its
+manufacturing dispersion, so units, not flights, are the independent draws).
+
+That rate is a draw: healthy scores cluster by unit (manufacturing
+dispersion), and a scored fleet of 30 units carries a sampling spread of
+about 1.5 points even for a perfectly calibrated threshold. So the same
+threshold is also applied to a large sample of *new* healthy units of the
+scored fleet's model (``POPULATION_UNITS`` units x 2 flights, manufactured
+after the training fleet's units with the training seed, so never seen by
+the method or the calibration): the *population* rate says whether the
+calibration is right, the scored-fleet rate what a run realised.
+
+For a scenario with nominal-parameter drift the rates are reported twice: on
+the drifted scored fleet (what the robustness KPIs measure: a drifted healthy
+unit may look abnormal) and on the same fleet without the drift (what the
+calibration controls).
+
+Run it from the command line (about two minutes of CPU for a 30-unit scenario with a
+cold cache; measured 2 min on paper_2012)::
+
+    python -m fuelhm_bench.benchmark.false_alarms                 # every shipped scenario
+    python -m fuelhm_bench.benchmark.false_alarms paper_2012 --a 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from fuelhm_bench.errors import FuelHMError
+from fuelhm_bench.scoring.thresholds import fit_healthy_model
+
+__all__ = ["PAPER_METHOD", "FalseAlarmRate", "healthy_false_alarm_rate", "main"]
+
+#: Size of the published knowledge simulated for the measurement: the paper method's score does not
+#: depend on it (only its diagnosis does), so the smallest design of experiments that builds it is used.
+KNOWLEDGE_SIZE = {"doe_units": 2}
+
+#: New healthy units (2 flights each) behind the population rate.
+POPULATION_UNITS = 300
+
+#: The method whose threshold is checked: the paper's Mahalanobis detector.
+PAPER_METHOD = "fuelhm_baselines.paper_mahalanobis:PaperMahalanobis"
+
+
+@dataclass(frozen=True)
+class FalseAlarmRate:
+    """Healthy false-alarm rate at ``mu + A sigma`` of the calibration scores.
+
+    Attributes
+    ----------
+    scenario : str
+        Scenario id.
+    drifted : bool
+        Whether the scored fleet carried the scenario's nominal-parameter drift.
+    a : float
+        ``A`` of the threshold.
+    rate, ci_low, ci_high : float
+        Share of healthy scored flights above the threshold, and its 95 %
+        unit-bootstrap percentile interval (2000 resamples, seed 0).
+    healthy_flights, healthy_units : int
+        Healthy flights scored, and the units they belong to.
+    calibration_flights, calibration_units : int
+        Size of the calibration split behind ``mu`` and ``sigma``.
+    population_rate, population_ci_low, population_ci_high : float
+        The same threshold's rate on ``population_units`` new healthy units
+        (2 flights each) of the scored fleet's model, with its 95 %
+        unit-bootstrap interval.
+    population_units : int
+    """
+
+    scenario: str
+    drifted: bool
+    a: float
+    rate: float
+    ci_low: float
+    ci_high: float
+    healthy_flights: int
+    healthy_units: int
+    calibration_flights: int
+    calibration_units: int
+    population_rate: float = float("nan")
+    population_ci_low: float = float("nan")
+    population_ci_high: float = float("nan")
+    population_units: int = 0
+
+
+def healthy_false_alarm_rate(scenario, *, a: float = 2.0, knowledge_size=None, cache_dir=None,
+                             timeout_s: float = 3000.0) -> list[FalseAlarmRate]:
+    """Run the paper's method on a scenario and measure its healthy false-alarm rate at ``mu + a sigma``.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        A shipped name, a YAML path or a loaded scenario.
+    a : float, default=2.0
+        ``A`` of the threshold (>= 0).
+    knowledge_size : KnowledgeSize, dict or None, default=None
+        Size of the published knowledge (it does not enter the paper method's score).
+    cache_dir : str, path-like, False or None, default=None
+        Simulation cache (:mod:`fuelhm_bench.datasets.cache`).
+    timeout_s : float, default=3000.0
+        Wall-time limit of the sealed method [s].
+
+    Returns
+    -------
+    list of FalseAlarmRate
+        One entry; two (drifted, then without the drift) for a scenario with drift.
+
+    Raises
+    ------
+    FuelHMError
+        When the method does not run (its status and message).
+    """
+    from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
+    from fuelhm_bench.scoring import scorecard_intervals
+    from fuelhm_bench.scoring.config import ScoringConfig
+
+    from fuelhm_bench.datasets.cache import training_indicators
+    from fuelhm_bench.methods import run_table
+    from fuelhm_bench.methods.loading import load_method
+
+    evaluation = prepare_evaluation(scenario, fidelity="physics", robustness=True, knowledge_size=knowledge_size,
+                                    cache_dir=cache_dir)
+    cal = evaluation.calibration_indicators
+    sc = evaluation.scenario
+    n_train = sc.training.units
+    # The same fit, in this process (deterministic: the sealed run's threshold is recomputed and checked).
+    method = load_method(PAPER_METHOD, {"a": float(a)})
+    method.fit(evaluation.fit_indicators, knowledge=evaluation.method_knowledge, random_state=0)
+    out = []
+    for ev in (evaluation, evaluation.nominal):
+        if ev is None:
+            continue
+        outcome = run_in_env(PAPER_METHOD, ev, params={"a": float(a)}, random_state=0, timeout_s=timeout_s)
+        if not outcome.ok:
+            raise FuelHMError(f"{ev.scenario.id}: the paper method did not run ({outcome.status}): {outcome.message}")
+        card = outcome.score(ScoringConfig(headline_a=float(a)))
+        row = scorecard_intervals(card).set_index("kpi").loc["fpr_standard_thr"]
+        healthy = card.flights[card.flights["true_mode"] == "healthy"]
+        threshold = card.healthy_model.threshold(float(a))
+        if not np.isclose(threshold, fit_healthy_model(run_table(method, cal)["score"]).threshold(float(a))):
+            raise FuelHMError(f"{ev.scenario.id}: the in-process fit of the paper method does not reproduce the "
+                              f"sealed run's threshold {threshold!r}.")
+        drifted = ev is evaluation and bool(sc.drift)
+        population = training_indicators(sc, units=n_train + POPULATION_UNITS, flights=2, drifted=drifted,
+                                         cache_dir=cache_dir)
+        population = population.loc[population["unit_id"] >= n_train, list(cal.columns)].reset_index(drop=True)
+        alarms = run_table(method, population)["score"].to_numpy() > threshold
+        rate, low, high = _unit_bootstrap(alarms, population["unit_id"].to_numpy())
+        out.append(FalseAlarmRate(ev.scenario.id, drifted, float(a),
+                                  float(row["value"]), float(row["ci_low"]), float(row["ci_high"]),
+                                  int(len(healthy)), int(healthy["unit_id"].nunique()),
+                                  int(len(cal)), int(cal["unit_id"].nunique()),
+                                  rate, low, high, int(population["unit_id"].nunique())))
+    return out
+
+
+def _unit_bootstrap(alarms: np.ndarray, units: np.ndarray, n_resamples: int = 2000,
+                    seed: int = 0) -> tuple[float, float, float]:
+    """Alarm rate and its 95 % percentile interval, resampling units (seeded)."""
+    codes, _ = pd.factorize(units)
+    hits = np.bincount(codes, weights=alarms.astype(float))
+    counts = np.bincount(codes).astype(float)
+    w = np.random.default_rng(seed).multinomial(len(counts), np.full(len(counts), 1.0 / len(counts)),
+                                                size=n_resamples)
+    rates = (w @ hits) / (w @ counts)
+    low, high = np.percentile(rates, [2.5, 97.5])
+    return float(hits.sum() / counts.sum()), float(low), float(high)
+
+
+def main(argv=None) -> int:
+    """Command line: print the healthy false-alarm rate of the paper's threshold per scenario."""
+    from scipy.stats import norm
+
+    from fuelhm_bench.scenarios import list_scenarios
+
+    p = argparse.ArgumentParser(prog="python -m fuelhm_bench.benchmark.false_alarms",
+                                description="Healthy false-alarm rate of the paper's threshold mu + A sigma "
+                                            "(calibration units of the training fleet) on shipped scenarios.")
+    p.add_argument("scenarios", nargs="*", help="scenario names or YAML files (default: every shipped one)")
+    p.add_argument("--a", type=float, default=2.0, help="A of the threshold (default 2)")
+    args = p.parse_args(argv)
+    if not (args.a >= 0):
+        p.error(f"--a must be a number >= 0. Got {args.a!r} instead.")
+    names = args.scenarios or list_scenarios()
+    print(f"Gaussian tail at A = {args.a:g}: {100 * norm.sf(args.a):.2f} %")
+    print("FAR: healthy flights of the scored fleet above mu + A sigma of the calibration scores; population: "
+          f"the same threshold on {POPULATION_UNITS} new healthy units x 2 flights. Intervals: 95 %, units resampled.")
+    print(f"{'scenario':24s} {'drift':5s} {'FAR %':>6s} {'95 % CI':>13s} {'healthy fl/units':>17s} "
+          f"{'calib. fl/units':>16s} {'population %':>12s} {'95 % CI':>13s}")
+    try:
+        for name in names:
+            for r in healthy_false_alarm_rate(name, a=args.a, knowledge_size=KNOWLEDGE_SIZE):
+                drift = "yes" if r.drifted else "no"
+                print(f"{r.scenario:24s} {drift:5s} {100 * r.rate:6.2f} {100 * r.ci_low:6.2f}-{100 * r.ci_high:<6.2f} "
+                      f"{r.healthy_flights:>10d} / {r.healthy_units:<4d} {r.calibration_flights:>9d} / "
+                      f"{r.calibration_units:<4d} {100 * r.population_rate:12.2f} "
+                      f"{100 * r.population_ci_low:6.2f}-{100 * r.population_ci_high:<6.2f}", flush=True)
+    except FuelHMError as exc:
+        print(f"false_alarms: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
