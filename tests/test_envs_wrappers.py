@@ -97,9 +97,11 @@ def test_docs_numpy_agent_beats_never_alarm(kwargs):
     exec(compile(code, str(DOC), "exec"), ns)
     env = ns["make_env"](maintenance=True, **{k: v for k, v in kwargs.items()
                                             if k not in ("scenario", "fidelity")})
-    w = ns["train"](env, episodes=300)
-    never = np.r_[np.zeros(20), -50.0]
-    seeds = range(10_000, 10_030)
-    trained = np.mean([ns["run"](env, w, None, s)[1].sum() for s in seeds])
-    baseline = np.mean([ns["run"](env, never, None, s)[1].sum() for s in seeds])
-    assert trained > baseline  # kUSD per unit life (measured +16 at the test sizes with the learnt surrogate)
+    never = np.r_[np.zeros(10), -1.0]
+    seeds = range(10_000, 10_030)  # evaluation units, never seen in training
+    baseline = np.mean([ns["episode_return"](env, never, s) for s in seeds])
+    for training_seed in (0, 1, 2):  # not one lucky seed: every training run must learn
+        w = ns["train"](env, seed=training_seed)
+        trained = np.mean([ns["episode_return"](env, w, s) for s in seeds])
+        # kUSD per unit life; measured -48, -233, -232 against -433 at the test sizes
+        assert trained > baseline + 50.0, (training_seed, trained, baseline)
