@@ -92,7 +92,7 @@ import pandas as pd
 
 from fuelhm_bench.datasets.cache import COORDINATE_PREFIX
 from fuelhm_bench.errors import DataFormatError
-from fuelhm_bench.physics.model import dispersion_coordinates
+from fuelhm_bench.physics.model import dispersion_coordinates, manufacturing_draws
 
 __all__ = ["SurrogateModel", "coordinate_columns", "fit_surrogate", "indicator_columns"]
 
@@ -154,15 +154,35 @@ def _unit_rows(table: pd.DataFrame, coords: tuple[str, ...]):
     return labels, inverse, z
 
 
-def _ridge(z: np.ndarray, y: np.ndarray, penalty: float):
-    """Ridge fit of ``y`` (k, p) on ``[1, z]`` (intercept not penalised): coefficients (1 + c, p), hat trace."""
+_PENALTIES = (0.0, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 1e3, 1e4)
+
+
+def _ridge(z: np.ndarray, y: np.ndarray, penalty: float | None):
+    """Ridge fit of ``y`` (k, p) on ``[1, z]`` (intercept not penalised): coefficients (1 + c, p), hat trace, penalty.
+
+    ``penalty`` None: chosen among :data:`_PENALTIES` by generalised cross-validation (one penalty for every
+    column, each column scaled by its standard deviation, so that exact linear relations between the
+    columns hold for the fitted values too).
+    """
     design = np.column_stack([np.ones(len(z)), z])
-    reg = penalty * np.eye(design.shape[1])
-    reg[0, 0] = 0.0
-    gram_inv = np.linalg.pinv(design.T @ design + reg)
-    coef = gram_inv @ design.T @ y
-    dof = float(np.trace(design @ gram_inv @ design.T))
-    return coef, dof
+    k = len(z)
+    scale = y.std(axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    best = None
+    for lam in (_PENALTIES if penalty is None else (float(penalty),)):
+        reg = lam * np.eye(design.shape[1])
+        reg[0, 0] = 0.0
+        gram_inv = np.linalg.pinv(design.T @ design + reg)
+        coef = gram_inv @ design.T @ y
+        dof = float(np.trace(design @ gram_inv @ design.T))
+        if k - dof < 0.5 and penalty is None:
+            continue
+        gcv = k * float((((y - design @ coef) / scale) ** 2).sum()) / max(k - dof, 1e-9) ** 2
+        if best is None or gcv < best[0]:
+            best = (gcv, coef, dof, lam)
+    if best is None:  # no penalty leaves a residual degree of freedom: the strongest one
+        return _ridge(z, y, _PENALTIES[-1])
+    return best[1], best[2], best[3]
 
 
 def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray, z: np.ndarray, penalty: float):
@@ -194,10 +214,11 @@ def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray, z: np.nd
     if complete.sum() < c + 3:
         z, c = z[:, :0], 0
     mean = np.full(p, np.nan)
+    lam = 0.0
     coef_map = np.zeros((p, c))
     between = np.zeros((p, p))
     if complete.any():
-        coef, dof = _ridge(z[complete], unit_mean[complete], penalty)
+        coef, dof, lam = _ridge(z[complete], unit_mean[complete], penalty)
         mean, coef_map = coef[0], coef[1:].T
         e = unit_mean[complete] - np.column_stack([np.ones(complete.sum()), z[complete]]) @ coef
         kc = int(complete.sum())
@@ -211,7 +232,7 @@ def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray, z: np.nd
     with np.errstate(invalid="ignore", divide="ignore"):
         plain = np.where(n_valid > 0, np.where(valid, x, 0.0).sum(axis=0) / n_valid, np.nan)
     mean = np.where(np.isfinite(mean), mean, plain)
-    return mean, coef_map, between, rows, rvalid, z.shape[1]
+    return mean, coef_map, between, rows, rvalid, z.shape[1], lam
 
 
 def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...], coords: tuple[str, ...],
@@ -255,16 +276,21 @@ def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...]
     fill = np.where(np.isfinite(fill), fill, 0.0)
     resp = np.where(np.isfinite(resp), resp, fill[None])
     c = z.shape[1] if k >= z.shape[1] + 3 else 0
-    flat = resp.reshape(k, -1)
-    coef, dof = _ridge(z[:, :c], flat, penalty)
-    mean = coef[0].reshape(m, q + 1, p)
+    mean = np.zeros((m, q + 1, p))
     coef_map = np.zeros((m, q + 1, p, z.shape[1]))
-    coef_map[..., :c] = np.moveaxis(coef[1:].reshape(c, m, q + 1, p), 0, -1)
-    fitted = np.column_stack([np.ones(k), z[:, :c]]) @ coef
-    # (no coordinates: dof = 1 and the DOE units' own responses are drawn, as an empirical law)
-    inflate = np.sqrt((k - 1) / (k - dof)) if k - dof >= 1.0 else 1.0
-    residual = ((flat - fitted) * inflate).reshape(k, m, q + 1, p)
-    return knots, learnt, mean, coef_map, residual, invalid
+    residual = np.zeros_like(resp)
+    penalties = []
+    for b in range(m):  # one penalty per mode (shared by its intensities and indicators)
+        flat = resp[:, b].reshape(k, -1)
+        coef, dof, lam = _ridge(z[:, :c], flat, penalty)
+        penalties.append(lam)
+        mean[b] = coef[0].reshape(q + 1, p)
+        coef_map[b, ..., :c] = np.moveaxis(coef[1:].reshape(c, q + 1, p), 0, -1)
+        fitted = np.column_stack([np.ones(k), z[:, :c]]) @ coef
+        # (no coordinates: dof = 1 and the DOE units' own responses are drawn, as an empirical law)
+        inflate = np.sqrt((k - 1) / (k - dof)) if k - dof >= 1.0 else 1.0
+        residual[:, b] = ((flat - fitted) * inflate).reshape(k, q + 1, p)
+    return knots, learnt, mean, coef_map, residual, invalid, penalties
 
 
 @dataclass(frozen=True, eq=False)
@@ -374,10 +400,26 @@ class SurrogateModel:
         """:func:`fit_surrogate` on a :class:`~fuelhm_bench.datasets.knowledge.KnowledgeResult`'s ``healthy_table`` and ``doe_table``."""
         return fit_surrogate(knowledge.healthy_table, knowledge.doe_table)
 
-    def unit_coordinates(self, model, nominal, dispersion) -> np.ndarray:
-        """The coordinates (:attr:`coordinates`) of a manufactured unit
-        (:func:`~fuelhm_bench.physics.model.dispersion_coordinates`)."""
-        return dispersion_coordinates(model, nominal, dispersion, self.coordinates)
+    def unit_coordinates(self, unit, nominal, dispersion) -> np.ndarray:
+        """The coordinates (:attr:`coordinates`) of a unit manufactured around ``nominal`` with ``dispersion``.
+
+        ``unit``: the manufactured :class:`~fuelhm_bench.physics.model.LoopModel`
+        (:func:`~fuelhm_bench.physics.model.dispersion_coordinates`), or the
+        ``numpy.random.Generator`` :func:`~fuelhm_bench.physics.model.manufacture`
+        would build it from (its draws are read without building the unit).
+        """
+        if isinstance(unit, np.random.Generator):
+            if float(dispersion.scale) == 0.0:
+                return np.zeros(len(self.coordinates))
+            order = [p for p, _ in dispersion.relative] + [p for p, _ in dispersion.additive]
+            z = dict(zip(order, manufacturing_draws(unit, dispersion)))
+            stds = dict(dispersion.relative) | dict(dispersion.additive)
+            missing = [c for c in self.coordinates if c not in z]
+            if missing:
+                raise DataFormatError(f"The surrogate's unit coordinates {missing} are not dispersed parameters of "
+                                      f"this fleet (dispersed: {order}).")
+            return np.array([z[c] if stds[c] else 0.0 for c in self.coordinates])
+        return dispersion_coordinates(unit, nominal, dispersion, self.coordinates)
 
     # ------------------------------------------------------------------ draws
     def draw_unit(self, rng: np.random.Generator, intensities: np.ndarray,
@@ -524,7 +566,7 @@ class SurrogateModel:
 
 
 def _fit_healthy(x, valid, units, z, penalty):
-    mean, coef_map, between, resid, rvalid, c = _healthy_parts(x, valid, units, z, penalty)
+    mean, coef_map, between, resid, rvalid, c, lam = _healthy_parts(x, valid, units, z, penalty)
     if not len(resid):
         raise DataFormatError("The healthy table of the surrogate needs at least one unit with two flights or "
                               "more (its flight-to-flight residuals). Got none.")
@@ -532,11 +574,11 @@ def _fit_healthy(x, valid, units, z, penalty):
         bad = np.flatnonzero(~np.isfinite(mean))
         raise DataFormatError(f"The healthy table of the surrogate has no valid value of indicator(s) "
                               f"{bad.tolist()}.")
-    return mean, coef_map, between, resid, rvalid, c
+    return mean, coef_map, between, resid, rvalid, c, lam
 
 
 def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | None = None,
-                  bootstrap: int = 50, seed: int = 0, penalty: float = 1.0) -> SurrogateModel:
+                  bootstrap: int = 50, seed: int = 0, penalty: float | None = None) -> SurrogateModel:
     """Learn a :class:`SurrogateModel` from physics indicator tables (a pure function of the tables).
 
     Parameters
@@ -560,9 +602,10 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
         (0: none).
     seed : int, default=0
         Seed of the bootstrap.
-    penalty : float, default=1.0
+    penalty : float or None, default=None
         Ridge penalty of the regressions on the unit coordinates (per unit of squared
-        standardised coordinate; the intercept is not penalised), >= 0.
+        standardised coordinate; the intercept is not penalised), >= 0; None: chosen per
+        regression by generalised cross-validation.
 
     Returns
     -------
@@ -598,14 +641,15 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
                               f"{[COORDINATE_PREFIX + c for c in absent]} of the healthy table.")
     x, valid = _values(healthy, names)
     labels, inverse, z = _unit_rows(healthy, coords)
-    mean, coef_map, between, resid, rvalid, c = _fit_healthy(x, valid, inverse, z, penalty)
+    mean, coef_map, between, resid, rvalid, c, h_pen = _fit_healthy(x, valid, inverse, z, penalty)
     coords = coords[:c]
-    knots, learnt, r_mean, r_map, resp, invalid = _responses(doe, names, modes, coords, penalty)
+    knots, learnt, r_mean, r_map, resp, invalid, r_pen = _responses(doe, names, modes, coords, penalty)
     if resp.shape[0] < 1:
         raise DataFormatError("The 'doe' table of fit_surrogate has no unit with a healthy flight.")
     info = {"healthy_units": int(len(labels)), "healthy_flights": int(len(healthy)),
             "residual_rows": int(len(resid)), "doe_units": int(resp.shape[0]),
-            "doe_intensities": knots.tolist(), "coordinates": len(coords)}
+            "doe_intensities": knots.tolist(), "coordinates": len(coords), "penalty_healthy": h_pen,
+            "penalty_responses": dict(zip(modes, r_pen))}
     if bootstrap and len(labels) >= 3:
         rng = np.random.default_rng(seed)
         stds, shares = [], []
@@ -615,7 +659,7 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
             rows = np.concatenate([index[i] for i in pick])
             new_units = np.concatenate([np.full(len(index[i]), b) for b, i in enumerate(pick)])
             try:
-                _, a, b_cov, r, rv, _ = _fit_healthy(x[rows], valid[rows], new_units, z[pick][:, :c], penalty)
+                _, a, b_cov, r, rv, _, _ = _fit_healthy(x[rows], valid[rows], new_units, z[pick][:, :c], h_pen)
             except DataFormatError:
                 continue
             rr = r[rv.all(axis=1)]

@@ -272,6 +272,15 @@ class Dispersion:
             raise range_error("Dispersion.scale", "in [0, 10]", self.scale)
 
 
+def manufacturing_draws(rng: np.random.Generator, dispersion: Dispersion = Dispersion()) -> np.ndarray:
+    """The standardised draws of :func:`manufacture` (relative parameters, then additive), clipped at 3.
+
+    What :func:`dispersion_coordinates` recovers from the unit (where the dispersion is not 0), without
+    building the unit.
+    """
+    return np.clip(rng.standard_normal(len(dispersion.relative) + len(dispersion.additive)), -3.0, 3.0)
+
+
 def dispersion_coordinates(model: LoopModel, nominal: LoopModel, dispersion: Dispersion = Dispersion(),
                            names: tuple | None = None) -> np.ndarray:
     """The standardised draws ``z`` of :func:`manufacture` that made ``model`` from ``nominal`` (its inverse).
@@ -331,7 +340,7 @@ def manufacture(nominal: LoopModel, rng: np.random.Generator, dispersion: Disper
     LoopModel
     """
     n_rel = len(dispersion.relative)
-    draws = np.clip(rng.standard_normal(n_rel + len(dispersion.additive)), -3.0, 3.0) * dispersion.scale
+    draws = manufacturing_draws(rng, dispersion) * dispersion.scale
     values: dict[str, float] = {}
     for (path, std), z in zip(dispersion.relative, draws[:n_rel]):
         values[path] = nominal.get(path) * (1.0 + std * z)
