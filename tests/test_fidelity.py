@@ -21,13 +21,19 @@ from fuelhm_bench.benchmark.fidelity import PANEL, TARGETS, fidelity_check
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
+def tiny(tmp_path_factory):
+    """A shrunk scenario and the cache its simulated products go to (shared by the module's tests)."""
     from conftest import _tiny_scenario
 
-    path = _tiny_scenario(tmp_path_factory.mktemp("scenario"), name="tiny_fidelity")
+    return _tiny_scenario(tmp_path_factory.mktemp("scenario"), name="tiny_fidelity"), tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
+def report(tiny):
+    path, cache = tiny
     methods = {"null": NullMethod(), "paper": PaperMahalanobis(cv=None), "full": FullGaussianMethod(cv=2)}
     return fidelity_check(path, methods=methods, flight_minutes=2.0, knowledge_size=KnowledgeSize.small(),
-                          cache_dir=tmp_path_factory.mktemp("cache"), timeout_s=120)
+                          cache_dir=cache, timeout_s=120)
 
 
 def test_report_compares_the_same_methods_at_both_fidelities(report):
@@ -91,3 +97,15 @@ def test_paper_2012_ranks_as_the_physics():
     assert m["summary_diff"].abs().max() <= 10.0
     missed = m[m["summary_diff"].abs() > TARGETS["summary_points"]]["method"]
     assert all(any(name in f for f in report.failures) for name in missed)
+
+
+def test_healthy_distances_compare_the_scored_fleet_at_both_fidelities(tiny, report):
+    from fuelhm_bench.benchmark.fidelity import healthy_distances
+
+    path, cache = tiny  # after the report: every simulated product is cached
+    table = healthy_distances(path, flight_minutes=2.0, knowledge_size=KnowledgeSize.small(), cache_dir=cache)
+    assert list(table.index) == ["physics", "surrogate"]
+    assert (table["flights"] > 0).all()
+    q = table[["q10", "q50", "q90", "q97.5"]].to_numpy()
+    assert np.all(np.isfinite(q)) and np.all(np.diff(q, axis=1) >= 0) and np.all(q > 0)
+    assert np.all(table["between_std_max"] >= table["between_std_min"])
