@@ -285,3 +285,14 @@ def test_coordinates_of_a_unit_are_its_manufacturing_draws():
     np.testing.assert_allclose(from_unit, from_rng, atol=1e-9)
     np.testing.assert_allclose(from_unit, dispersion_coordinates(unit, LoopModel(), disp))
     assert np.abs(from_unit).max() <= 3.0 and np.abs(from_unit).min() > 0.0
+
+
+def test_every_learnt_column_is_drawn_and_addressable_by_name(model):
+    """Extended indicators are drawn like the others: values and validity of every learnt column."""
+    parts = model.draw_parts(np.random.default_rng(1), 6)
+    values, valid = model.degrade(parts, np.zeros((6, 2)))
+    assert parts["healthy"].shape == values.shape == valid.shape == (6, len(NAMES))
+    j = model.columns(["EXT"])
+    assert j.tolist() == [4] and np.all(valid[:, j]) and np.all(np.isfinite(values[:, j]))
+    with pytest.raises(DataFormatError, match=r"not learnt on the indicator\(s\) \['V_in9'\]"):
+        model.columns(["EXT", "V_in9"])

@@ -421,6 +421,21 @@ class SurrogateModel:
             return np.array([z[c] if stds[c] else 0.0 for c in self.coordinates])
         return dispersion_coordinates(unit, nominal, dispersion, self.coordinates)
 
+    def columns(self, names) -> np.ndarray:
+        """Positions in :attr:`names` of the indicators ``names`` (e.g. ``EXTENDED_INDICATOR_NAMES``).
+
+        Raises
+        ------
+        DataFormatError
+            An indicator the surrogate was not learnt on (its physics tables lacked the column).
+        """
+        names = [str(n) for n in names]
+        missing = [n for n in names if n not in self.names]
+        if missing:
+            raise DataFormatError(f"The surrogate was not learnt on the indicator(s) {missing} (its physics "
+                                  f"tables have {list(self.names)}).")
+        return np.array([self.names.index(n) for n in names], dtype=np.intp)
+
     # ------------------------------------------------------------------ draws
     def draw_unit(self, rng: np.random.Generator, intensities: np.ndarray,
                   coordinates: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
