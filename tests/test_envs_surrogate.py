@@ -8,12 +8,14 @@ the slow test against physics flights at the end.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
 
 from fuelhm_bench.envs.surrogate import SurrogateModel, fit_surrogate, indicator_columns
-from fuelhm_bench.errors import DataFormatError
+from fuelhm_bench.errors import DataFormatError, ParameterError
 
 NAMES = ["A", "B", "C", "D", "EXT"]  # C = (A + B) / 2 exactly; EXT stands for an extended indicator
 MODES = ("m1", "m2")
@@ -211,3 +213,86 @@ def test_surrogate_healthy_flights_sit_where_physics_flights_do(tmp_path):
     ratio = median_distance(s) / median_distance(x)
     # physics flights are in-sample for their own covariance (biased low), so the ratio sits a little above 1
     assert 0.8 <= ratio <= 1.6, ratio
+
+
+# --------------------------------------------------------------------------- unit coordinates
+def _with_coordinates(table, z_of_unit, coords):
+    extra = pd.DataFrame(z_of_unit[table["unit_id"].to_numpy()], columns=[f"unit_z:{c}" for c in coords],
+                         index=table.index)
+    return pd.concat([table, extra], axis=1)
+
+
+def test_unit_means_and_responses_follow_the_unit_coordinates():
+    """Unit means linear in 3 coordinates (plus a small unexplained part), an m1 response that scales
+    with a coordinate: the fit recovers both maps, and a unit drawn at given coordinates sits there."""
+    rng = np.random.default_rng(4)
+    coords = ("a", "b", "c")
+    z = rng.standard_normal((80, 3))
+    slope = np.array([[2.0, 0.0, 0.0], [0.0, -1.0, 0.0], [1.0, -0.5, 0.0], [0.0, 0.0, 0.5], [0.0, 3.0, 0.0]])
+    unit = z @ slope.T + 0.05 * rng.standard_normal((80, 5))
+    x = (unit[:, None, :] + 0.3 * rng.standard_normal((80, 4, 5))).reshape(-1, 5) + 1.0
+    x[:, 2] = 0.5 * (x[:, 0] + x[:, 1])
+    h = _with_coordinates(_table(x, np.ones_like(x, dtype=bool), np.repeat(np.arange(80), 4)), z, coords)
+    d = doe_table(n_units=20)
+    zd = rng.standard_normal((20, 3))
+    gain = 4.0 + 2.0 * zd[:, 0]  # m1 moves A by gain * f**2: its response depends on coordinate a
+    m1 = (d["mode"] == "m1").to_numpy()
+    u = d["unit_id"].to_numpy()
+    f = d["intensity"].to_numpy()
+    base = d["A"].to_numpy() - np.where(m1, (2.0 + u) * f ** 2, 0.0)
+    d["A"] = base + np.where(m1, gain[u] * f ** 2, 0.0)
+    d["C"] = 0.5 * (d["A"] + d["B"])
+    d = _with_coordinates(d, zd, coords)
+    model = fit_surrogate(h, d, modes=MODES, bootstrap=0)
+    assert model.coordinates == coords and model.fit_info["coordinates"] == 3
+    np.testing.assert_allclose(model.coordinate_map[[0, 1, 3, 4]], slope[[0, 1, 3, 4]], atol=0.25)
+    at = np.array([1.5, -2.0, 0.0])
+    values, valid = model.draw_unit(np.random.default_rng(0), np.zeros((200, 2)), coordinates=at)
+    unit_mean = values.mean(axis=0)
+    expected = model.mean + slope @ at
+    np.testing.assert_allclose(unit_mean, expected, atol=0.15)  # unexplained unit sd 0.05, flight sd 0.3
+    np.testing.assert_allclose(values[:, 2], 0.5 * (values[:, 0] + values[:, 1]), atol=1e-9)
+    # the response at f = 1 follows gain(a) = 4 + 2 a (the unexplained DOE spread is small here)
+    for a in (-1.0, 1.0):
+        c = np.array([a, 0.0, 0.0])
+        curve = [model.response_curve(0, k, c)[-1, 0] for k in range(model.responses.shape[0])]
+        assert abs(np.mean(curve) - (4.0 + 2.0 * a)) < 0.5
+
+
+def test_a_mode_the_doe_did_not_fly_is_refused():
+    d = doe_table(n_units=3)
+    d = d[d["mode"] != "m2"]
+    model = fit_surrogate(healthy_table(n_units=6, n_flights=3), d, modes=MODES, bootstrap=0)
+    assert model.learnt.tolist() == [True, False]
+    model.draw_unit(np.random.default_rng(0), np.array([[0.5, 0.0]]))
+    with pytest.raises(ParameterError, match=r"not learnt for the mode\(s\) \['m2'\]"):
+        model.draw_unit(np.random.default_rng(0), np.array([[0.0, 0.5]]))
+
+
+def test_coordinates_of_a_unit_are_its_manufacturing_draws():
+    """From the built unit or from the generator manufacture would use: the same coordinates."""
+    from fuelhm_bench.flights.fleet import unit_rng
+    from fuelhm_bench.physics.model import Dispersion, LoopModel, dispersion_coordinates, manufacture
+
+    disp = Dispersion(scale=1.5)
+    model = fit_surrogate(healthy_table(n_units=4, n_flights=3), doe_table(n_units=2), modes=MODES, bootstrap=0)
+    names = tuple(p for p, _ in disp.relative) + tuple(p for p, _ in disp.additive)
+    model = dataclasses.replace(model, coordinates=names, coordinate_map=np.zeros((5, len(names))),
+                                response_map=np.zeros((2, 4, 5, len(names))))
+    unit = manufacture(LoopModel(), unit_rng(7, 3), disp)
+    from_unit = model.unit_coordinates(unit, LoopModel(), disp)
+    from_rng = model.unit_coordinates(unit_rng(7, 3), LoopModel(), disp)
+    np.testing.assert_allclose(from_unit, from_rng, atol=1e-9)
+    np.testing.assert_allclose(from_unit, dispersion_coordinates(unit, LoopModel(), disp))
+    assert np.abs(from_unit).max() <= 3.0 and np.abs(from_unit).min() > 0.0
+
+
+def test_every_learnt_column_is_drawn_and_addressable_by_name(model):
+    """Extended indicators are drawn like the others: values and validity of every learnt column."""
+    parts = model.draw_parts(np.random.default_rng(1), 6)
+    values, valid = model.degrade(parts, np.zeros((6, 2)))
+    assert parts["healthy"].shape == values.shape == valid.shape == (6, len(NAMES))
+    j = model.columns(["EXT"])
+    assert j.tolist() == [4] and np.all(valid[:, j]) and np.all(np.isfinite(values[:, j]))
+    with pytest.raises(DataFormatError, match=r"not learnt on the indicator\(s\) \['V_in9'\]"):
+        model.columns(["EXT", "V_in9"])

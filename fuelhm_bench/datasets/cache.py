@@ -46,6 +46,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from fuelhm_bench._numba_cache import CACHE_ENV_VAR  # the variable overriding the cache directory
@@ -59,6 +60,8 @@ __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", 
 _FORMAT = 1
 _MEMORY: OrderedDict[str, object] = OrderedDict()
 _MEMORY_SIZE = 64
+#: Prefix of the unit-coordinate columns (``unit_z:<parameter path>``) of the surrogate's tables.
+COORDINATE_PREFIX = "unit_z:"
 
 
 @dataclass(frozen=True)
@@ -82,14 +85,15 @@ class KnowledgeSize:
     healthy_flights : int, default=5
         Flights per published healthy unit, >= 1 (units x flights >= 11 for a
         10-indicator Gaussian).
-    surrogate_units : int, default=20
+    surrogate_units : int, default=60
         Units of the healthy fleet the surrogate's healthy law is learnt on
-        (new units of the scored fleet's model, :func:`surrogate_healthy`), >= 1.
-    surrogate_flights : int, default=10
+        (new units of the scored fleet's model, :func:`surrogate_healthy`), >= 1;
+        their unit means are regressed on their 12 manufacturing coordinates.
+    surrogate_flights : int, default=4
         Flights per surrogate healthy unit, >= 1.
-    surrogate_doe_units : int, default=6
+    surrogate_doe_units : int, default=24
         Units of the design of experiments the surrogate's degraded responses
-        are learnt on (the scored fleet's model), >= 1.
+        are learnt on (the scored fleet's model, the scenario's modes only), >= 1.
     surrogate_doe_intensities : tuple of float, default=(0.1, 0.25, 0.5, 0.75, 1.0)
         Its intensities, each in (0, 1].
     doe_modes : tuple of str, default=MODE_IDS
@@ -108,9 +112,9 @@ class KnowledgeSize:
     doe_intensities: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
     healthy_units: int = 8
     healthy_flights: int = 5
-    surrogate_units: int = 20
-    surrogate_flights: int = 10
-    surrogate_doe_units: int = 6
+    surrogate_units: int = 60
+    surrogate_flights: int = 4
+    surrogate_doe_units: int = 24
     surrogate_doe_intensities: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75, 1.0)
     doe_modes: tuple[str, ...] = MODE_IDS
 
@@ -447,26 +451,26 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     model), this one flies the scenario's truth model (hidden effects), with
     the scored fleet's drift when ``drifted``, its mission, sensor and
     dispersion: ``size.surrogate_doe_units`` units at
-    ``size.surrogate_doe_intensities``, seeded from the test seed.
+    ``size.surrogate_doe_intensities``, seeded from the test seed, for the
+    modes the scenario schedules (all seven when it schedules none of them).
+    Each unit's manufacturing coordinates are in its ``unit_z:<parameter>``
+    columns (:func:`fuelhm_bench.physics.model.dispersion_coordinates`).
 
     Returns
     -------
     pandas.DataFrame
         The table of :func:`fuelhm_bench.datasets.doe.run_doe` (a copy).
     """
-    from fuelhm_bench.datasets.doe import DesignOfExperiments, run_doe
+    from fuelhm_bench.datasets.doe import _STREAM_DOE_UNIT, run_doe
+    from fuelhm_bench.flights.fleet import rng_for
+    from fuelhm_bench.physics.model import manufacture
 
     sc = resolve_scenario(scenario)
     _check_minutes(flight_minutes, "surrogate_doe")
     size = KnowledgeSize() if size is None else size
-    config = _with_minutes(sc.test_fleet_config(), flight_minutes)
-    drifted = bool(drifted) and bool(sc.drift)
-    nominal = sc.drifted_model() if drifted else sc.truth_model()
-    doe = DesignOfExperiments(n_units=size.surrogate_doe_units, intensities=size.surrogate_doe_intensities,
-                              mission=config.mission, nominal=nominal, dispersion=config.dispersion,
-                              seed=config.seed + 1)
+    doe = _surrogate_design(sc, flight_minutes, size, drifted)
     params = {"units": size.surrogate_doe_units, "intensities": list(size.surrogate_doe_intensities),
-              "drifted": drifted}
+              "drifted": bool(drifted) and bool(sc.drift), "modes": list(doe.modes)}
     key = cache_key("surrogate-doe", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
@@ -474,7 +478,34 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
 
     table = _cached(key, _entry(cache_dir, "surrogate-doe", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "surrogate-doe", "flight_minutes": flight_minutes, **params})
-    return table.copy()
+    return _with_coordinates(table, [manufacture(doe.nominal, rng_for(doe.seed, _STREAM_DOE_UNIT, u), doe.dispersion)
+                                     for u in range(doe.n_units)], doe.nominal, doe.dispersion)
+
+
+def _surrogate_design(sc, flight_minutes, size, drifted):
+    """The design of experiments of :func:`surrogate_doe`."""
+    from fuelhm_bench.datasets.doe import DesignOfExperiments
+    from fuelhm_bench.taxonomy import MODE_IDS
+
+    config = _with_minutes(sc.test_fleet_config(), flight_minutes)
+    drifted = bool(drifted) and bool(sc.drift)
+    nominal = sc.drifted_model() if drifted else sc.truth_model()
+    scheduled = {s.mode for s in sc.mode_schedules()}
+    modes = tuple(m for m in MODE_IDS if m in scheduled) or tuple(MODE_IDS)
+    return DesignOfExperiments(n_units=size.surrogate_doe_units, intensities=size.surrogate_doe_intensities,
+                               modes=modes, mission=config.mission, nominal=nominal, dispersion=config.dispersion,
+                               seed=config.seed + 1)
+
+
+def _with_coordinates(table: pd.DataFrame, models: list, nominal, dispersion) -> pd.DataFrame:
+    """``table`` (a copy) with the ``unit_z:<parameter>`` columns of unit ``unit_id`` = index in ``models``."""
+    from fuelhm_bench.physics.model import dispersion_coordinates
+
+    z = np.array([dispersion_coordinates(m, nominal, dispersion) for m in models])
+    names = [p for p, _ in dispersion.relative] + [p for p, _ in dispersion.additive]
+    index = table["unit_id"].to_numpy(dtype=np.int64)
+    extra = pd.DataFrame(z[index], columns=[COORDINATE_PREFIX + n for n in names], index=table.index)
+    return pd.concat([table, extra], axis=1)
 
 
 def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,
@@ -488,7 +519,9 @@ def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: Kn
     but seeded apart from both the training fleet and the scored fleet: the
     surrogate must not be learnt on the very flights methods are fitted on
     (a model always looks better on the flights it has seen, so a surrogate
-    made of them would flatter every method).
+    made of them would flatter every method). Each unit's manufacturing
+    coordinates are in its ``unit_z:<parameter>`` columns
+    (:func:`fuelhm_bench.physics.model.dispersion_coordinates`).
 
     Returns
     -------
@@ -496,6 +529,7 @@ def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: Kn
         The table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
     """
     from fuelhm_bench.datasets import fleet_indicators
+    from fuelhm_bench.flights.fleet import build_units
 
     sc = resolve_scenario(scenario)
     _check_minutes(flight_minutes, "surrogate_healthy")
@@ -513,7 +547,7 @@ def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: Kn
 
     table = _cached(key, _entry(cache_dir, "surrogate-healthy", sc, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": "surrogate-healthy", "flight_minutes": flight_minutes, **params})
-    return table.copy()
+    return _with_coordinates(table, [u.model for u in build_units(config)], config.nominal, config.dispersion)
 
 
 def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,

@@ -538,7 +538,11 @@ class ActuationLoopEnv(gym.Env):
         self._active_log, self._fail_log, self._repair_log, self._cost_log = [], [], [], []
         if self.fidelity == "surrogate":
             rng = rng_for(self._seed, _STREAM_SURROGATE, self._slot)
-            self._parts = self.surrogate.draw_parts(rng, n)
+            # the unit the physics would fly: its manufacturing coordinates drive its draws
+            coordinates = self.surrogate.unit_coordinates(
+                self._model if self._model is not None else unit_rng(self._seed, self._slot), config.nominal,
+                config.dispersion)
+            self._parts = self.surrogate.draw_parts(rng, n, coordinates)
             self._fill_surrogate(0, intensity)
         elif self._model is None:
             from fuelhm_bench.physics.model import manufacture

@@ -12,19 +12,35 @@ whose law is learnt, once, from two indicator tables simulated by the physics
   same mission and noise every time, so that ``I(unit, mode, f) - I(unit, healthy)``
   is the unit's own response to the degradation.
 
+Both tables may carry each unit's **manufacturing coordinates** ``z`` (columns
+``unit_z:<parameter path>``): the standardised draws of
+:func:`~fuelhm_bench.physics.model.manufacture` that made the unit
+(:func:`~fuelhm_bench.physics.model.dispersion_coordinates`). On physics v2 a
+unit's healthy indicators are dominated by who the unit is (unit share 0.7 to
+1 of the variance) and are close to linear in ``z`` (a unit-mean regression on
+the 12 coordinates explains 95 to 100 % of the unit-to-unit variance of the ten
+Table I indicators on ``paper_2012``). The environment hands the surrogate the
+coordinates of the very unit the physics would fly (the scored fleet's units
+are manufactured from the same seeds, which costs nothing), so the scored
+fleet's unit-to-unit spread, a random realisation that decides the healthy
+false alarms of every method, is the physics' own.
+
 The indicators are every column ``c`` of the tables that has a ``c_valid``
-companion (the ten of Table I, and any extended indicator the extractor adds).
-A unit's flights are then drawn as::
+companion (the ten of Table I, and any extended indicator the extractor adds:
+all are learnt and drawn alike). A unit's flights are then drawn as::
 
-    I[flight] = mean + u + r[flight] + sum_m D_m(f_m[flight])
+    I[flight] = mean + A z + u + r[flight] + sum_m D_m(f_m[flight]; z)
 
-1. ``mean``: the healthy mean of the table.
-2. ``u ~ N(0, B)``, drawn once per unit: the unit-to-unit part. ``B`` is the
-   one-way random-effects (ANOVA) estimate of the between-unit covariance,
-   ``(MS_between - MS_within) / n0``, with negative eigenvalues set to 0. Its
-   small directions are those of the physics: an exact relation of the
-   indicators (``Inb = (X1 + X2) / 2``) holds for every unit mean, so ``B`` has
-   no variance across it.
+1. ``mean + A z``: the unit mean at its coordinates, a ridge regression of the
+   physics units' means on ``[1, z]`` (intercept not penalised). Without
+   coordinates (or too few units for them), ``A = 0``.
+2. ``u ~ N(0, B)``, drawn once per unit: the unit-to-unit part the coordinates
+   do not explain. ``B`` is the covariance of the regression residuals of the
+   unit means (divided by the residual degrees of freedom) minus the part due
+   to the flight-to-flight noise of a mean, with negative eigenvalues set to 0.
+   Its small directions are those of the physics: an exact relation of the
+   indicators (``Inb = (X1 + X2) / 2``) holds for every unit mean and every
+   fitted value, so ``B`` and ``A`` have no variance across it.
 3. ``r``: a flight-to-flight residual *resampled* from the physics: a row of
    the pooled within-unit residuals ``x - unit mean`` (inflated by
    ``sqrt(n_u / (n_u - 1))`` so that their variance is unbiased), drawn with
@@ -32,13 +48,18 @@ A unit's flights are then drawn as::
    flight-to-flight covariance, its small directions, its non-Gaussian tails
    and the joint patterns of invalid indicators are those of real flights,
    not of a fitted Gaussian.
-4. ``D_m(f)``: the response of mode ``m`` at intensity ``f``, piecewise linear
+4. ``D_m(f; z)``: the response of mode ``m`` at intensity ``f``, piecewise linear
    between the DOE intensities (0 at 0, the last segment continued beyond
-   the largest), of a DOE unit drawn once per unit and mode: the curvature of
-   the laws and their unit-to-unit spread are those of the DOE. A DOE flight
+   the largest). At each intensity it is regressed on the DOE units'
+   coordinates like the unit means (its dependence on who the unit is), plus
+   the unexplained part of a DOE unit drawn once per unit and mode (inflated
+   for the fitted degrees of freedom): the curvature of the laws and their
+   unit-to-unit spread are those of the DOE. A DOE flight
    that made an indicator invalid makes it invalid in the surrogate (between
    two DOE intensities the nearer one's pattern is used with a probability
-   given by the distance). Simultaneous modes add their responses.
+   given by the distance). Simultaneous modes add their responses. A mode the
+   DOE did not fly (the cached DOE flies the scenario's modes only) is not
+   learnt: an intensity of it is refused (:attr:`SurrogateModel.learnt`).
 
 Estimation error. Everything is estimated from a finite physics sample, and
 the fitted surrogate says how much (:attr:`SurrogateModel.fit_info`,
@@ -54,11 +75,12 @@ What the surrogate does not reproduce: interactions between simultaneous
 modes (their responses add), flight-to-flight variation of a mode's response
 (the DOE flies one mission per unit, so a unit's response is the same on
 every flight at a given intensity: this is what backlash, whose limit cycle
-depends on the flight, misses most), any dependence of a mode's response on the
-unit's healthy state or on the flight's conditions beyond what the DOE unit
-drawn carries, correlation between consecutive flights of a unit beyond the
-shared unit effect, and unit effects that are far from Gaussian (their
-covariance is kept, their shape is not).
+depends on the flight, misses most), non-linear dependence of the unit mean or
+of a response on the coordinates, dependence of a response on the flight's
+conditions beyond what the DOE unit drawn carries, correlation between
+consecutive flights of a unit beyond the shared unit effect, and a Gaussian
+shape for the unexplained unit part (its covariance is kept, its shape is not).
+Faults outside the seven modes are not modelled.
 """
 
 from __future__ import annotations
@@ -68,9 +90,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from fuelhm_bench.datasets.cache import COORDINATE_PREFIX
 from fuelhm_bench.errors import DataFormatError
+from fuelhm_bench.physics.model import dispersion_coordinates, manufacturing_draws
 
-__all__ = ["SurrogateModel", "fit_surrogate", "indicator_columns"]
+__all__ = ["SurrogateModel", "coordinate_columns", "fit_surrogate", "indicator_columns"]
 
 
 def indicator_columns(table: pd.DataFrame) -> tuple[str, ...]:
@@ -107,12 +131,66 @@ def _factor(matrix: np.ndarray) -> np.ndarray:
     return v * np.sqrt(w)
 
 
-def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray):
-    """Mean, between-unit covariance, pooled residuals (0 where invalid) and their validity."""
+def coordinate_columns(table: pd.DataFrame) -> tuple[str, ...]:
+    """Unit-coordinate columns of a table: every ``unit_z:<parameter path>`` column, in table order.
+
+    Examples
+    --------
+    >>> coordinate_columns(pd.DataFrame(columns=["unit_id", "unit_z:driver.gain", "X1", "X1_valid"]))
+    ('driver.gain',)
+    """
+    return tuple(str(c)[len(COORDINATE_PREFIX):] for c in table.columns if str(c).startswith(COORDINATE_PREFIX))
+
+
+def _unit_rows(table: pd.DataFrame, coords: tuple[str, ...]):
+    """Per row: unit index; per unit: its coordinates (first row of the unit), shape (k, c)."""
+    labels, inverse = np.unique(table["unit_id"].to_numpy(), return_inverse=True)
+    first = np.zeros(len(labels), dtype=np.intp)
+    first[inverse[::-1]] = np.arange(len(inverse))[::-1]
+    z = np.column_stack([pd.to_numeric(table[COORDINATE_PREFIX + c], errors="coerce").to_numpy(np.float64)[first]
+                         for c in coords]) if coords else np.zeros((len(labels), 0))
+    if not np.all(np.isfinite(z)):
+        raise DataFormatError("The unit-coordinate columns (unit_z:...) of the surrogate's tables must be finite.")
+    return labels, inverse, z
+
+
+_PENALTIES = (0.0, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 1e3, 1e4)
+
+
+def _ridge(z: np.ndarray, y: np.ndarray, penalty: float | None):
+    """Ridge fit of ``y`` (k, p) on ``[1, z]`` (intercept not penalised): coefficients (1 + c, p), hat trace, penalty.
+
+    ``penalty`` None: chosen among :data:`_PENALTIES` by generalised cross-validation (one penalty for every
+    column, each column scaled by its standard deviation, so that exact linear relations between the
+    columns hold for the fitted values too).
+    """
+    design = np.column_stack([np.ones(len(z)), z])
+    k = len(z)
+    scale = y.std(axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    best = None
+    for lam in (_PENALTIES if penalty is None else (float(penalty),)):
+        reg = lam * np.eye(design.shape[1])
+        reg[0, 0] = 0.0
+        gram_inv = np.linalg.pinv(design.T @ design + reg)
+        coef = gram_inv @ design.T @ y
+        dof = float(np.trace(design @ gram_inv @ design.T))
+        if k - dof < 0.5 and penalty is None:
+            continue
+        gcv = k * float((((y - design @ coef) / scale) ** 2).sum()) / max(k - dof, 1e-9) ** 2
+        if best is None or gcv < best[0]:
+            best = (gcv, coef, dof, lam)
+    if best is None:  # no penalty leaves a residual degree of freedom: the strongest one
+        return _ridge(z, y, _PENALTIES[-1])
+    return best[1], best[2], best[3]
+
+
+def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray, z: np.ndarray, penalty: float):
+    """Intercept, coordinate map, residual between-unit covariance, pooled residuals and their validity.
+
+    ``z`` (k, c): coordinates of the units in ``np.unique(units)`` order (c may be 0).
+    """
     p = x.shape[1]
-    n_valid = valid.sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):  # an indicator never valid: NaN mean, no warning
-        mean = np.where(n_valid > 0, np.where(valid, x, 0.0).sum(axis=0) / n_valid, np.nan)
     labels, inverse = np.unique(units, return_inverse=True)
     k = len(labels)
     counts = np.zeros((k, p))
@@ -126,43 +204,61 @@ def _healthy_parts(x: np.ndarray, valid: np.ndarray, units: np.ndarray):
     with np.errstate(invalid="ignore", divide="ignore"):
         inflate = np.where(n_row > 1, np.sqrt(n_row / np.maximum(n_row - 1, 1)), 0.0)
     resid = resid * inflate
-    # residual rows that carry information: the unit flew more than one flight
-    keep = (n_row > 1).any(axis=1)
-    # Between-unit covariance on complete rows (one-way ANOVA, unbalanced: n0).
-    complete = valid.all(axis=1)
+    keep = (n_row > 1).any(axis=1)  # residual rows that carry information: the unit flew more than one flight
+    rows, rvalid = resid[keep], valid[keep]
+    full = rows[rvalid.all(axis=1)]
+    within = full.T @ full / max(len(full), 1)
+    # Unit means regressed on the unit coordinates (units with every indicator valid at least once).
+    complete = (counts > 0).all(axis=1)
+    c = z.shape[1]
+    if complete.sum() < c + 3:
+        z, c = z[:, :0], 0
+    mean = np.full(p, np.nan)
+    lam = 0.0
+    coef_map = np.zeros((p, c))
     between = np.zeros((p, p))
     if complete.any():
-        lab_c, inv_c, cnt_c = np.unique(inverse[complete], return_inverse=True, return_counts=True)
-        xc = x[complete]
-        kc, nc = len(lab_c), len(xc)
-        if kc >= 2 and nc - kc >= 1:
-            means = np.zeros((kc, p))
-            np.add.at(means, inv_c, xc)
-            means /= cnt_c[:, None]
-            within = xc - means[inv_c]
-            ms_within = within.T @ within / (nc - kc)
-            dev = means - xc.mean(axis=0)
-            ms_between = (dev * cnt_c[:, None]).T @ dev / (kc - 1)
-            n0 = (nc - (cnt_c ** 2).sum() / nc) / (kc - 1)
-            between = _psd((ms_between - ms_within) / n0)
-    return mean, between, resid[keep], valid[keep]
+        coef, dof, lam = _ridge(z[complete], unit_mean[complete], penalty)
+        mean, coef_map = coef[0], coef[1:].T
+        e = unit_mean[complete] - np.column_stack([np.ones(complete.sum()), z[complete]]) @ coef
+        kc = int(complete.sum())
+        if kc - dof >= 1.0:
+            # flight-to-flight noise of a unit mean: W_ij / max(n_i, n_j) (flights valid on both), averaged
+            n = counts[complete]
+            noise = within * np.mean(1.0 / np.maximum(n[:, :, None], n[:, None, :]), axis=0)
+            between = _psd(e.T @ e / (kc - dof) - noise)
+    # an indicator never valid on a complete unit: its plain mean
+    n_valid = valid.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        plain = np.where(n_valid > 0, np.where(valid, x, 0.0).sum(axis=0) / n_valid, np.nan)
+    mean = np.where(np.isfinite(mean), mean, plain)
+    return mean, coef_map, between, rows, rvalid, z.shape[1], lam
 
 
-def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...]):
-    """Knot intensities, per-DOE-unit responses ``(k, m, q + 1, p)`` and their invalidity."""
+def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...], coords: tuple[str, ...],
+               penalty: float):
+    """Knots, per-mode learnt flags, mean responses, coordinate maps, per-DOE-unit residual responses, invalidity.
+
+    The response of DOE unit ``a`` to mode ``b`` at knot ``c`` is ``I(a, b, f_c) - I(a, healthy)``; it is
+    regressed on the unit's coordinates (ridge, as the healthy unit means); what the coordinates do not
+    explain is kept per DOE unit (inflated for the fitted degrees of freedom) and drawn with the unit.
+    """
     x, valid = _values(doe, names)
     mode = doe["mode"].astype(str).to_numpy()
     intensity = pd.to_numeric(doe["intensity"], errors="coerce").to_numpy(dtype=np.float64)
     units = doe["unit_id"].to_numpy()
+    labels, inverse, z_all = _unit_rows(doe, coords)
     deg = mode != "healthy"
     knots = np.unique(intensity[deg & np.isin(mode, modes)])
     knots = knots[np.isfinite(knots) & (knots > 0)]
-    unit_labels = [u for u in pd.unique(units) if ((units == u) & (mode == "healthy")).any()]
-    k, m, q, p = len(unit_labels), len(modes), len(knots), len(names)
+    unit_index = [a for a, u in enumerate(labels) if ((units == u) & (mode == "healthy")).any()]
+    k, m, q, p = len(unit_index), len(modes), len(knots), len(names)
+    z = z_all[unit_index]
     resp = np.full((k, m, q + 1, p), np.nan)
     invalid = np.zeros((k, m, q + 1, p), dtype=bool)
     resp[:, :, 0, :] = 0.0
-    for a, u in enumerate(unit_labels):
+    for a, ui in enumerate(unit_index):
+        u = labels[ui]
         h = np.flatnonzero((units == u) & (mode == "healthy"))[0]
         for b, md in enumerate(modes):
             for c, f in enumerate(knots):
@@ -172,13 +268,29 @@ def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...]
                 r = rows[0]
                 resp[a, b, c + 1] = np.where(valid[r] & valid[h], x[r] - x[h], np.nan)
                 invalid[a, b, c + 1] = valid[h] & ~valid[r]
+    learnt = np.array([bool(np.isin(mode, [md]).any()) for md in modes], dtype=bool)
     # A response that is unknown (invalid flight, missing case) takes the mean of the other DOE units; else 0.
     known = np.isfinite(resp)
     with np.errstate(invalid="ignore", divide="ignore"):
         fill = np.where(known, resp, 0.0).sum(axis=0) / known.sum(axis=0)
     fill = np.where(np.isfinite(fill), fill, 0.0)
     resp = np.where(np.isfinite(resp), resp, fill[None])
-    return knots, resp, invalid
+    c = z.shape[1] if k >= z.shape[1] + 3 else 0
+    mean = np.zeros((m, q + 1, p))
+    coef_map = np.zeros((m, q + 1, p, z.shape[1]))
+    residual = np.zeros_like(resp)
+    penalties = []
+    for b in range(m):  # one penalty per mode (shared by its intensities and indicators)
+        flat = resp[:, b].reshape(k, -1)
+        coef, dof, lam = _ridge(z[:, :c], flat, penalty)
+        penalties.append(lam)
+        mean[b] = coef[0].reshape(q + 1, p)
+        coef_map[b, ..., :c] = np.moveaxis(coef[1:].reshape(c, q + 1, p), 0, -1)
+        fitted = np.column_stack([np.ones(k), z[:, :c]]) @ coef
+        # (no coordinates: dof = 1 and the DOE units' own responses are drawn, as an empirical law)
+        inflate = np.sqrt((k - 1) / (k - dof)) if k - dof >= 1.0 else 1.0
+        residual[:, b] = ((flat - fitted) * inflate).reshape(k, q + 1, p)
+    return knots, learnt, mean, coef_map, residual, invalid, penalties
 
 
 @dataclass(frozen=True, eq=False)
@@ -189,13 +301,13 @@ class SurrogateModel:
     ----------
     names : tuple of str
         Indicator columns drawn, in order (units: those of the physics tables,
-        mA, mm/s, mm/s/mA for the ten of Table I).
+        mA, mm/s, mm/s/mA for the ten of Table I; the extended indicators too).
     modes : tuple of str
         Degradation modes, in the order of the intensity columns.
     mean : ndarray of shape (p,)
-        Healthy mean.
+        Healthy mean of a unit at the nominal coordinates (``z = 0``).
     unit_factor : ndarray of shape (p, p)
-        ``L`` with ``L L^T = B``, the between-unit covariance.
+        ``L`` with ``L L^T = B``, the between-unit covariance the coordinates do not explain.
     residuals : ndarray of shape (r, p)
         Pooled within-unit residuals of the healthy physics flights (0 where invalid).
     residual_valid : ndarray of shape (r, p), bool
@@ -203,9 +315,20 @@ class SurrogateModel:
     knots : ndarray of shape (q,)
         DOE intensities (fraction of the Table III maximum), increasing, > 0.
     responses : ndarray of shape (k, m, q + 1, p)
-        Response of each DOE unit to each mode at 0 and at each knot.
+        What the coordinates do not explain of each DOE unit's response to each mode at 0 and at each knot.
     response_invalid : ndarray of shape (k, m, q + 1, p), bool
         Indicators the degradation made invalid on that DOE flight.
+    coordinates : tuple of str, default=()
+        Dispersed parameters whose standardised values (:func:`~fuelhm_bench.physics.model.dispersion_coordinates`) the unit effect and the
+        responses are regressed on; empty: no regression (``coordinate_map`` and ``response_map`` of width 0).
+    coordinate_map : ndarray of shape (p, c) or None
+        Healthy unit mean per unit coordinate.
+    response_mean : ndarray of shape (m, q + 1, p) or None
+        Response at ``z = 0`` (None: the mean of ``responses``, which are then not centred).
+    response_map : ndarray of shape (m, q + 1, p, c) or None
+        Response per unit coordinate.
+    learnt : ndarray of shape (m,), bool, or None
+        Modes the DOE flew (None: all); an intensity of another mode is refused.
     fit_info : dict
         Sizes of the physics sample (``healthy_units``, ``healthy_flights``,
         ``residual_rows``, ``doe_units``) and unit-bootstrap standard errors
@@ -221,21 +344,41 @@ class SurrogateModel:
     knots: np.ndarray
     responses: np.ndarray
     response_invalid: np.ndarray
+    coordinates: tuple = ()
+    coordinate_map: np.ndarray | None = None
+    response_mean: np.ndarray | None = None
+    response_map: np.ndarray | None = None
+    learnt: np.ndarray | None = None
     fit_info: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         names, modes = tuple(map(str, self.names)), tuple(map(str, self.modes))
+        coords = tuple(map(str, self.coordinates))
         object.__setattr__(self, "names", names)
         object.__setattr__(self, "modes", modes)
-        p, m = len(names), len(modes)
+        object.__setattr__(self, "coordinates", coords)
+        p, m, c = len(names), len(modes), len(coords)
         q = len(np.atleast_1d(self.knots))
         k = np.shape(self.responses)[0] if np.ndim(self.responses) == 4 else -1
         r = np.shape(self.residuals)[0] if np.ndim(self.residuals) == 2 else -1
+        if self.coordinate_map is None:
+            object.__setattr__(self, "coordinate_map", np.zeros((p, c)))
+        if self.response_map is None:
+            object.__setattr__(self, "response_map", np.zeros((m, q + 1, p, c)))
+        if self.learnt is None:
+            object.__setattr__(self, "learnt", np.ones(m, dtype=bool))
+        if self.response_mean is None and k >= 1 and np.shape(self.responses)[1:] == (m, q + 1, p):
+            resp = np.asarray(self.responses, dtype=np.float64)
+            object.__setattr__(self, "response_mean", resp.mean(axis=0))
+            object.__setattr__(self, "responses", resp - resp.mean(axis=0))
         shapes = {"mean": (p,), "unit_factor": (p, p), "residuals": (r, p), "residual_valid": (r, p),
-                  "knots": (q,), "responses": (k, m, q + 1, p), "response_invalid": (k, m, q + 1, p)}
+                  "knots": (q,), "responses": (k, m, q + 1, p), "response_invalid": (k, m, q + 1, p),
+                  "coordinate_map": (p, c), "response_mean": (m, q + 1, p), "response_map": (m, q + 1, p, c),
+                  "learnt": (m,)}
         for name, shape in shapes.items():
-            dtype = bool if name in ("residual_valid", "response_invalid") else np.float64
-            arr = np.array(getattr(self, name), dtype=dtype, copy=True)
+            dtype = bool if name in ("residual_valid", "response_invalid", "learnt") else np.float64
+            value = getattr(self, name)
+            arr = np.array(value if value is not None else np.nan, dtype=dtype, copy=True)
             if arr.shape != shape or min(shape, default=1) < 0 or not np.all(np.isfinite(arr)):
                 raise DataFormatError(f"The '{name}' parameter of SurrogateModel must be a finite array of shape "
                                       f"{shape}. Got shape {arr.shape} instead.")
@@ -248,9 +391,8 @@ class SurrogateModel:
             raise DataFormatError(f"The 'knots' parameter of SurrogateModel must be increasing and > 0. "
                                   f"Got {self.knots.tolist()} instead.")
         grid = np.concatenate([[0.0], self.knots])
-        # derived once for the draws (never part of the parameters): segment slopes, modes that lose indicators
+        # derived once for the draws (never part of the parameters): knot spacing, modes that lose indicators
         object.__setattr__(self, "_grid", grid)
-        object.__setattr__(self, "_slopes", np.diff(self.responses, axis=2) / np.diff(grid)[None, None, :, None])
         object.__setattr__(self, "_lossy", self.response_invalid.any(axis=(2, 3)))
 
     @classmethod
@@ -258,8 +400,45 @@ class SurrogateModel:
         """:func:`fit_surrogate` on a :class:`~fuelhm_bench.datasets.knowledge.KnowledgeResult`'s ``healthy_table`` and ``doe_table``."""
         return fit_surrogate(knowledge.healthy_table, knowledge.doe_table)
 
+    def unit_coordinates(self, unit, nominal, dispersion) -> np.ndarray:
+        """The coordinates (:attr:`coordinates`) of a unit manufactured around ``nominal`` with ``dispersion``.
+
+        ``unit``: the manufactured :class:`~fuelhm_bench.physics.model.LoopModel`
+        (:func:`~fuelhm_bench.physics.model.dispersion_coordinates`), or the
+        ``numpy.random.Generator`` :func:`~fuelhm_bench.physics.model.manufacture`
+        would build it from (its draws are read without building the unit).
+        """
+        if isinstance(unit, np.random.Generator):
+            if float(dispersion.scale) == 0.0:
+                return np.zeros(len(self.coordinates))
+            order = [p for p, _ in dispersion.relative] + [p for p, _ in dispersion.additive]
+            z = dict(zip(order, manufacturing_draws(unit, dispersion)))
+            stds = dict(dispersion.relative) | dict(dispersion.additive)
+            missing = [c for c in self.coordinates if c not in z]
+            if missing:
+                raise DataFormatError(f"The surrogate's unit coordinates {missing} are not dispersed parameters of "
+                                      f"this fleet (dispersed: {order}).")
+            return np.array([z[c] if stds[c] else 0.0 for c in self.coordinates])
+        return dispersion_coordinates(unit, nominal, dispersion, self.coordinates)
+
+    def columns(self, names) -> np.ndarray:
+        """Positions in :attr:`names` of the indicators ``names`` (e.g. ``EXTENDED_INDICATOR_NAMES``).
+
+        Raises
+        ------
+        DataFormatError
+            An indicator the surrogate was not learnt on (its physics tables lacked the column).
+        """
+        names = [str(n) for n in names]
+        missing = [n for n in names if n not in self.names]
+        if missing:
+            raise DataFormatError(f"The surrogate was not learnt on the indicator(s) {missing} (its physics "
+                                  f"tables have {list(self.names)}).")
+        return np.array([self.names.index(n) for n in names], dtype=np.intp)
+
     # ------------------------------------------------------------------ draws
-    def draw_unit(self, rng: np.random.Generator, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def draw_unit(self, rng: np.random.Generator, intensities: np.ndarray,
+                  coordinates: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Indicators of the flights of one new unit.
 
         Parameters
@@ -268,32 +447,55 @@ class SurrogateModel:
             Source of every draw of the unit.
         intensities : ndarray of shape (n_flights, len(modes))
             Mode intensities of each flight (fraction of the Table III maximum).
+        coordinates : ndarray of shape (len(coordinates),) or None, default=None
+            The unit's manufacturing coordinates (:meth:`unit_coordinates`); None: drawn.
 
         Returns
         -------
         values : ndarray of shape (n_flights, p)
-            float64, ``names`` order; 0 where invalid.
+            float64, ``names`` order (extended indicators included); 0 where invalid.
         valid : ndarray of shape (n_flights, p), bool
         """
-        parts = self.draw_parts(rng, len(intensities))
+        parts = self.draw_parts(rng, len(intensities), coordinates)
         return self.degrade(parts, intensities)
 
-    def draw_parts(self, rng: np.random.Generator, n_flights: int) -> dict:
-        """The random parts of one unit: healthy flights, chosen DOE units, uniforms for invalid patterns.
+    def draw_parts(self, rng: np.random.Generator, n_flights: int, coordinates: np.ndarray | None = None) -> dict:
+        """The random parts of one unit: healthy flights, chosen DOE unit per mode, uniforms for invalid patterns.
 
-        Two calls of ``rng``: ``standard_normal(p)`` (the unit effect) and
+        Calls of ``rng``: ``standard_normal(p)`` (the unexplained unit effect),
         ``random(n_flights * (1 + len(modes)) + len(modes))`` (residual rows, DOE
-        units, invalid-pattern uniforms).
+        units, invalid-pattern uniforms) and, only when ``coordinates`` is None,
+        ``standard_normal(c)`` clipped at 3 (the unit's coordinates, drawn as
+        :func:`~fuelhm_bench.physics.model.manufacture` draws them).
+
+        Returns
+        -------
+        dict
+            ``healthy`` (n_flights, p): every column of :attr:`names` (the ten of
+            Table I and any extended indicator), invalid ones arbitrary;
+            ``valid`` (n_flights, p), bool; ``doe_units`` (m,); ``uniforms``
+            (n_flights, m); ``coordinates`` (c,).
         """
-        m = len(self.modes)
+        m, c = len(self.modes), len(self.coordinates)
         z = rng.standard_normal(len(self.names))
         u = rng.random(n_flights * (1 + m) + m)
+        if coordinates is None:
+            coordinates = np.clip(rng.standard_normal(c), -3.0, 3.0) if c else np.zeros(0)
+        coordinates = np.asarray(coordinates, dtype=np.float64)
+        if coordinates.shape != (c,) or not np.all(np.isfinite(coordinates)):
+            raise DataFormatError(f"The 'coordinates' of SurrogateModel.draw_parts must be {c} finite numbers (one "
+                                  f"per coordinate {list(self.coordinates)}). Got {coordinates!r:.80} instead.")
         rows = (u[:n_flights] * len(self.residuals)).astype(np.intp)
         doe_units = (u[n_flights:n_flights + m] * self.responses.shape[0]).astype(np.intp)
         uniforms = u[n_flights + m:].reshape(n_flights, m)
-        healthy = (self.mean + self.unit_factor @ z) + self.residuals[rows]
+        healthy = (self.mean + self.coordinate_map @ coordinates + self.unit_factor @ z) + self.residuals[rows]
         return {"healthy": healthy, "valid": self.residual_valid[rows], "doe_units": doe_units,
-                "uniforms": uniforms}
+                "uniforms": uniforms, "coordinates": coordinates}
+
+    def response_curve(self, mode: int, doe_unit: int, coordinates: np.ndarray) -> np.ndarray:
+        """Response of a unit to mode ``mode`` at 0 and at each knot, shape (q + 1, p)."""
+        return (self.response_mean[mode] + self.response_map[mode] @ coordinates
+                + self.responses[doe_unit, mode])
 
     def degrade(self, parts: dict, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Add the mode responses to a unit's healthy flights (:meth:`draw_parts`).
@@ -310,21 +512,37 @@ class SurrogateModel:
         values : ndarray of shape (n, p)
             0 where invalid.
         valid : ndarray of shape (n, p), bool
+
+        Raises
+        ------
+        ParameterError
+            A positive intensity of a mode the surrogate was not learnt for (:attr:`learnt`).
         """
         out = parts["healthy"]
         valid = parts["valid"]
-        grid, slopes, lossy = self._grid, self._slopes, self._lossy
+        coordinates = parts.get("coordinates", np.zeros(len(self.coordinates)))
+        grid, lossy = self._grid, self._lossy
         last = len(grid) - 1
         intensities = np.asarray(intensities, dtype=np.float64)
+        active = np.flatnonzero(intensities.max(axis=0) > 0) if intensities.size else np.zeros(0, dtype=np.intp)
+        unlearnt = [self.modes[j] for j in active if not self.learnt[j]]
+        if unlearnt:
+            from fuelhm_bench.errors import ParameterError
+
+            raise ParameterError(f"The surrogate was not learnt for the mode(s) {unlearnt} (its design of "
+                                 f"experiments flew only {[m for m, ok in zip(self.modes, self.learnt) if ok]}); "
+                                 f"use the physics fidelity for them.")
         if last:
-            for j in np.flatnonzero(intensities.max(axis=0) > 0):
+            for j in active:
                 f = intensities[:, j]
                 d = parts["doe_units"][j]
+                curve = self.response_curve(j, d, coordinates)
+                slopes = np.diff(curve, axis=0) / np.diff(grid)[:, None]
                 # segment [grid[i0], grid[i0 + 1]]; beyond the largest knot the last segment continues
                 i0 = np.searchsorted(grid, f, side="right") - 1
                 np.minimum(i0, last - 1, out=i0)
                 np.maximum(i0, 0, out=i0)
-                out = out + self.responses[d, j, i0] + (f - grid[i0])[:, None] * slopes[d, j, i0]
+                out = out + curve[i0] + (f - grid[i0])[:, None] * slopes[i0]
                 if lossy[d, j]:
                     w = (f - grid[i0]) / (grid[i0 + 1] - grid[i0])
                     nearest = np.minimum(i0 + (parts["uniforms"][:, j] < w), last)
@@ -334,8 +552,9 @@ class SurrogateModel:
     # ------------------------------------------------------------------ summaries
     @property
     def unit_cov(self) -> np.ndarray:
-        """Between-unit covariance ``B``."""
-        return self.unit_factor @ self.unit_factor.T
+        """Between-unit covariance: explained by the coordinates (``z ~ N(0, I)``) plus ``B``."""
+        a = self.coordinate_map
+        return a @ a.T + self.unit_factor @ self.unit_factor.T
 
     @property
     def flight_cov(self) -> np.ndarray:
@@ -361,8 +580,8 @@ class SurrogateModel:
                             index=pd.Index(self.names, name="indicator"))
 
 
-def _fit_healthy(x, valid, units):
-    mean, between, resid, rvalid = _healthy_parts(x, valid, units)
+def _fit_healthy(x, valid, units, z, penalty):
+    mean, coef_map, between, resid, rvalid, c, lam = _healthy_parts(x, valid, units, z, penalty)
     if not len(resid):
         raise DataFormatError("The healthy table of the surrogate needs at least one unit with two flights or "
                               "more (its flight-to-flight residuals). Got none.")
@@ -370,11 +589,11 @@ def _fit_healthy(x, valid, units):
         bad = np.flatnonzero(~np.isfinite(mean))
         raise DataFormatError(f"The healthy table of the surrogate has no valid value of indicator(s) "
                               f"{bad.tolist()}.")
-    return mean, between, resid, rvalid
+    return mean, coef_map, between, resid, rvalid, c, lam
 
 
 def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | None = None,
-                  bootstrap: int = 50, seed: int = 0) -> SurrogateModel:
+                  bootstrap: int = 50, seed: int = 0, penalty: float | None = None) -> SurrogateModel:
     """Learn a :class:`SurrogateModel` from physics indicator tables (a pure function of the tables).
 
     Parameters
@@ -383,17 +602,25 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
         Healthy flights: ``unit_id``, the indicator columns and their ``<name>_valid``
         companions (:func:`fuelhm_bench.datasets.fleet_indicators`). At least one
         unit with two flights; two units or more for the unit-to-unit part.
+        Optional ``unit_z:<parameter path>`` columns: the unit's manufacturing
+        coordinates (:func:`~fuelhm_bench.physics.model.dispersion_coordinates`), the same on every row of a unit.
     doe : pandas.DataFrame
         Design-of-experiments table (:func:`fuelhm_bench.datasets.doe.run_doe`):
         ``unit_id``, ``mode`` (``"healthy"`` or a mode id), ``intensity`` and the
-        same indicator columns.
+        same indicator columns (and the same ``unit_z:`` columns when the healthy
+        table has them).
     modes : tuple of str or None, default=None
         Mode order of the intensities the surrogate is given; None: ``MODE_IDS``.
+        A mode the DOE did not fly is not learnt (its intensities are refused).
     bootstrap : int, default=50
         Unit-bootstrap replicates for the standard errors of :meth:`SurrogateModel.describe`
         (0: none).
     seed : int, default=0
         Seed of the bootstrap.
+    penalty : float or None, default=None
+        Ridge penalty of the regressions on the unit coordinates (per unit of squared
+        standardised coordinate; the intercept is not penalised), >= 0; None: chosen per
+        regression by generalised cross-validation.
 
     Returns
     -------
@@ -422,31 +649,37 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
     if absent:
         raise DataFormatError(f"The 'doe' table of fit_surrogate lacks the indicator column(s) {absent} of the "
                               f"healthy table.")
+    coords = coordinate_columns(healthy)
+    absent = [c for c in coords if COORDINATE_PREFIX + c not in doe.columns]
+    if absent:
+        raise DataFormatError(f"The 'doe' table of fit_surrogate lacks the unit-coordinate column(s) "
+                              f"{[COORDINATE_PREFIX + c for c in absent]} of the healthy table.")
     x, valid = _values(healthy, names)
-    units = healthy["unit_id"].to_numpy()
-    mean, between, resid, rvalid = _fit_healthy(x, valid, units)
-    knots, resp, invalid = _responses(doe, names, modes)
+    labels, inverse, z = _unit_rows(healthy, coords)
+    mean, coef_map, between, resid, rvalid, c, h_pen = _fit_healthy(x, valid, inverse, z, penalty)
+    coords = coords[:c]
+    knots, learnt, r_mean, r_map, resp, invalid, r_pen = _responses(doe, names, modes, coords, penalty)
     if resp.shape[0] < 1:
         raise DataFormatError("The 'doe' table of fit_surrogate has no unit with a healthy flight.")
-    labels = pd.unique(units)
     info = {"healthy_units": int(len(labels)), "healthy_flights": int(len(healthy)),
             "residual_rows": int(len(resid)), "doe_units": int(resp.shape[0]),
-            "doe_intensities": knots.tolist()}
+            "doe_intensities": knots.tolist(), "coordinates": len(coords), "penalty_healthy": h_pen,
+            "penalty_responses": dict(zip(modes, r_pen))}
     if bootstrap and len(labels) >= 3:
         rng = np.random.default_rng(seed)
         stds, shares = [], []
-        index = {u: np.flatnonzero(units == u) for u in labels}
+        index = [np.flatnonzero(inverse == i) for i in range(len(labels))]
         for _ in range(int(bootstrap)):
             pick = rng.integers(0, len(labels), len(labels))
-            rows = np.concatenate([index[labels[i]] for i in pick])
-            new_units = np.concatenate([np.full(len(index[labels[i]]), b) for b, i in enumerate(pick)])
+            rows = np.concatenate([index[i] for i in pick])
+            new_units = np.concatenate([np.full(len(index[i]), b) for b, i in enumerate(pick)])
             try:
-                _, b_cov, r, rv = _fit_healthy(x[rows], valid[rows], new_units)
+                _, a, b_cov, r, rv, _, _ = _fit_healthy(x[rows], valid[rows], new_units, z[pick][:, :c], h_pen)
             except DataFormatError:
                 continue
             rr = r[rv.all(axis=1)]
             w = np.diag(rr.T @ rr / max(len(rr), 1))
-            bd = np.diag(b_cov)
+            bd = np.diag(b_cov) + np.sum(a ** 2, axis=1)
             stds.append(np.sqrt(bd + w))
             shares.append(bd / np.where(bd + w > 0, bd + w, 1.0))
         if len(stds) >= 2:
@@ -454,4 +687,5 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
             info["unit_share_se"] = np.std(shares, axis=0, ddof=1)
     return SurrogateModel(names=names, modes=modes, mean=mean, unit_factor=_factor(between), residuals=resid,
                           residual_valid=rvalid, knots=knots, responses=resp, response_invalid=invalid,
-                          fit_info=info)
+                          coordinates=coords, coordinate_map=coef_map, response_mean=r_mean, response_map=r_map,
+                          learnt=learnt, fit_info=info)

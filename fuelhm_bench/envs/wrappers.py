@@ -88,7 +88,7 @@ def healthy_statistics(env: gym.Env) -> tuple[np.ndarray, np.ndarray]:
     if surrogate is not None:
         # unit-to-unit variance (its Gaussian unit effect) + flight-to-flight variance (its resampled residuals)
         idx = [list(surrogate.names).index(n) for n in INDICATOR_NAMES]
-        between = np.sum(np.asarray(surrogate.unit_factor, float)[idx] ** 2, axis=1)
+        between = np.diag(np.asarray(surrogate.unit_cov, float))[idx]
         res = np.where(np.asarray(surrogate.residual_valid, bool), np.asarray(surrogate.residuals, float), np.nan)[:, idx]
         n_valid = np.isfinite(res).sum(axis=0)
         within = np.where(n_valid > 1, np.nansum(res ** 2, axis=0) / np.maximum(n_valid - 1, 1), 0.0)

@@ -272,6 +272,57 @@ class Dispersion:
             raise range_error("Dispersion.scale", "in [0, 10]", self.scale)
 
 
+def manufacturing_draws(rng: np.random.Generator, dispersion: Dispersion = Dispersion()) -> np.ndarray:
+    """The standardised draws of :func:`manufacture` (relative parameters, then additive), clipped at 3.
+
+    What :func:`dispersion_coordinates` recovers from the unit (where the dispersion is not 0), without
+    building the unit.
+    """
+    return np.clip(rng.standard_normal(len(dispersion.relative) + len(dispersion.additive)), -3.0, 3.0)
+
+
+def dispersion_coordinates(model: LoopModel, nominal: LoopModel, dispersion: Dispersion = Dispersion(),
+                           names: tuple | None = None) -> np.ndarray:
+    """The standardised draws ``z`` of :func:`manufacture` that made ``model`` from ``nominal`` (its inverse).
+
+    For a relative dispersion ``(path, s)``: ``(value / nominal - 1) / (s * scale)``; for an additive
+    one: ``(value - nominal) / (s * scale)``; 0 where the dispersion is 0.
+
+    Parameters
+    ----------
+    model, nominal : LoopModel
+        A manufactured unit and the nominal model it was manufactured around.
+    dispersion : Dispersion
+    names : tuple of str or None, default=None
+        Parameter paths wanted, in order; None: every dispersed one (relative, then additive).
+
+    Returns
+    -------
+    ndarray of shape (len(names),)
+
+    Examples
+    --------
+    >>> unit = manufacture(LoopModel(), np.random.default_rng(0))
+    >>> z = dispersion_coordinates(unit, LoopModel())
+    >>> bool(np.allclose(z, np.clip(np.random.default_rng(0).standard_normal(len(z)), -3, 3)))
+    True
+    """
+    terms = {path: (std, True) for path, std in dispersion.relative}
+    terms.update({path: (std, False) for path, std in dispersion.additive})
+    names = tuple(terms) if names is None else tuple(names)
+    unknown = [n for n in names if n not in terms]
+    if unknown:
+        raise range_error("dispersion_coordinates.names", f"dispersed parameters ({list(terms)})", unknown)
+    out = np.zeros(len(names))
+    for i, path in enumerate(names):
+        std, relative = terms[path]
+        scale = float(std) * float(dispersion.scale)
+        if scale != 0.0:
+            value, value0 = float(model.get(path)), float(nominal.get(path))
+            out[i] = ((value / value0 - 1.0) if relative else (value - value0)) / scale
+    return out
+
+
 def manufacture(nominal: LoopModel, rng: np.random.Generator, dispersion: Dispersion = Dispersion()) -> LoopModel:
     """Draw one manufactured unit around ``nominal`` (seeded, deterministic).
 
@@ -289,7 +340,7 @@ def manufacture(nominal: LoopModel, rng: np.random.Generator, dispersion: Disper
     LoopModel
     """
     n_rel = len(dispersion.relative)
-    draws = np.clip(rng.standard_normal(n_rel + len(dispersion.additive)), -3.0, 3.0) * dispersion.scale
+    draws = manufacturing_draws(rng, dispersion) * dispersion.scale
     values: dict[str, float] = {}
     for (path, std), z in zip(dispersion.relative, draws[:n_rel]):
         values[path] = nominal.get(path) * (1.0 + std * z)
