@@ -14,6 +14,7 @@ probe's terms, the gaps and the fitted main parameter.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from dataclasses import dataclass
@@ -66,16 +67,45 @@ def default_cases() -> list[AltCase]:
     return cases
 
 
-def run_case(case: AltCase, *, n_units: int, n_flights: int, minutes: float, n_jobs: int = 2) -> dict:
-    """Simulate one case and run the workflow; a flat record of the outcome."""
+def diagnostics(r) -> dict:
+    """Everything the decision rule reads, per candidate (for re-deciding offline and for the docs)."""
+    import numpy as np
+
+    from fuelhm_bench.calibration.curve import gap, gap_noise_floor
+    from fuelhm_bench.calibration.discrepancy import correlation_time
+
+    v = r.v_heldout["recalibrated"]
+    floor_recal = gap_noise_floor(r.heldout, v, r.curve, correlation_time([r.heldout], [v]))
+    out = r.as_json()
+    out["gap_floor_recalibrated"] = floor_recal
+    out["curve_rms"] = gap(r.heldout, np.zeros_like(v), r.curve)
+    out["ranking_units"] = [{"effect": c.effect, "held": list(c.held), "tag": c.tag,
+                             "unit_values": {str(k): v for k, v in c.unit_values.items()}} for c in r.ranking]
+    return out
+
+
+def run_case(case: AltCase, *, n_units: int, n_flights: int, minutes: float, n_jobs: int = 2,
+             dump: str | None = None) -> dict:
+    """Simulate one case and run the workflow; a flat record of the outcome (``dump``: a directory that
+    receives the case's full diagnostics as JSON)."""
+    import json
+    from pathlib import Path
+
     from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy
     from fuelhm_bench.io import split_flights
 
     frame = simulate_flights(case.effects, n_units=n_units, n_flights=n_flights, minutes=minutes, seed=case.seed)
     flights, _ = split_flights(frame)
     t0 = time.perf_counter()
+    c0 = time.process_time()
     r = find_discrepancy(flights, config=DiscrepancyConfig(n_jobs=n_jobs, seed=case.seed))
     seconds = time.perf_counter() - t0
+    if dump:
+        Path(dump).mkdir(parents=True, exist_ok=True)
+        d = {"case": case.name, "truth": case.truth, "main": list(case.main) if case.main else None,
+             "seconds": seconds, "cpu_seconds": time.process_time() - c0, **diagnostics(r)}
+        (Path(dump) / (case.name.replace(" ", "_").replace("/", "_").replace(":", "") + ".json")).write_text(
+            json.dumps(d, default=str))
     named = [m.effect for m in r.effect_set]
     fitted = float("nan")
     if case.main is not None and case.truth in named:
@@ -105,6 +135,8 @@ def main(argv=None) -> int:
     p.add_argument("--minutes", type=float, default=10.0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--cases", default="", help="comma-separated substrings of case names (default: all)")
+    p.add_argument("--dump", default=None, help="directory for each case's full diagnostics (JSON)")
+    p.add_argument("--seed-offset", type=int, default=0, help="added to every case's seed (held-out replicates)")
     p.add_argument("--force", action="store_true")
     a = p.parse_args(argv)
     from pathlib import Path
@@ -119,7 +151,9 @@ def main(argv=None) -> int:
         cases = [c for c in cases if any(k in c.name for k in keys)]
     rows = []
     for c in cases:
-        rec = run_case(c, n_units=a.units, n_flights=a.flights, minutes=a.minutes, n_jobs=a.jobs)
+        if a.seed_offset:
+            c = dataclasses.replace(c, seed=c.seed + a.seed_offset)
+        rec = run_case(c, n_units=a.units, n_flights=a.flights, minutes=a.minutes, n_jobs=a.jobs, dump=a.dump)
         rows.append(rec)
         print(" | ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in rec.values()), flush=True)
         pd.DataFrame(rows).to_csv(out, index=False)
