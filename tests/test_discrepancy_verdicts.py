@@ -7,6 +7,7 @@ model under test: one small test per verdict in the default run.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -119,3 +120,44 @@ def test_verdict_unexplained_on_an_effect_outside_the_library():
     assert out["verdict"] == "unexplained" and out["set"] == []
     assert out["flags"] and out["flags"][0]["reading"] == "likely absorbing a missing effect"
     assert out["probe"]["terms"][0]["term"] == r.probe.terms[0]
+
+
+def test_equivalent_lags_are_reported_with_the_test_that_separates_them():
+    # A 30 ms lag of the coil current behind the recorded command (altsim): the LVDT lag mimics it
+    # (it delays the same transients), less well. With an equivalence margin of 30 points both lags
+    # are reported, with the measurement that tells them apart; with the default 10 points they are not.
+    _, flights = _flights(AltEffects(driver_lag_s=0.03), seed=20)
+    lags = ("lvdt_lag", "current_driver_lag")
+    wide = dataclasses.replace(SMALL, candidates=lags, equivalence_margin=0.3)
+    r = find_discrepancy(flights, config=wide)
+    ranking = [(c.label, round(c.delta_bic), round(c.gap_reduction, 2)) for c in r.ranking]
+    assert r.verdict == "effect" and r.effect_set[0].effect == "current_driver_lag", ranking
+    assert r.parameters["time_constant_s"] == pytest.approx(0.03, rel=0.25)
+    eq = [e for e in r.equivalents if {e.selected, e.alternative} == set(lags)]
+    assert len(eq) == 1, ranking
+    e = eq[0]
+    assert e.reduction_alternative >= e.reduction_selected - 0.3 and e.reduction_alternative >= 0.5
+    assert e.test == separating_test("lvdt_lag", "current_driver_lag") and "coil current" in e.test
+    out = json.loads(json.dumps(r.as_json(), default=float))
+    assert out["equivalents"][0]["alternative"] == "lvdt_lag" and "coil current" in out["equivalents"][0]["test"]
+    # The same candidate fits under the default margin: the driver lag explains clearly more.
+    assert e.reduction_selected - e.reduction_alternative > SMALL.equivalence_margin
+
+
+@pytest.mark.slow
+def test_forward_selection_names_two_altsim_effects_with_their_shares():
+    # An LVDT lag of 50 ms and a torque-motor play of 0.3 mA at once (altsim laws): the lag is added
+    # first, the play second (its own held-out reduction on top of the lag), shares summing to one.
+    _, flights = _flights(AltEffects(lvdt_lag_s=0.05, hysteresis_a=3e-4), seed=41)
+    cfg = dataclasses.replace(SMALL, candidates=("lvdt_lag", "torque_motor_hysteresis", "spool_overlap"))
+    r = find_discrepancy(flights, config=cfg)
+    ranking = [(c.label, c.tag, round(c.delta_bic), round(c.gap_reduction, 2)) for c in r.ranking]
+    assert r.verdict == "effect", (r.unexplained, ranking)
+    assert [m.effect for m in r.effect_set] == ["lvdt_lag", "torque_motor_hysteresis"], ranking
+    lag, play = r.effect_set
+    assert lag.parameters["time_constant_s"] == pytest.approx(0.05, rel=0.25)
+    assert 0.0 < play.parameters["width_a"] < 1e-3
+    assert lag.share > play.share > 0.05
+    assert lag.share + play.share == pytest.approx(1.0)
+    assert play.gap_after < 0.8 * play.gap_before and play.delta_bic > SMALL.bic_threshold
+    assert r.gap_after < 2.0 * r.gap_floor
