@@ -112,8 +112,10 @@ class DiscrepancyConfig:
     seed : int, default=0
         Seed of the split and of the segment draws.
     hold_flagged : bool, default=True
-        Also fit every candidate with the recalibrated parameters flagged as absorbing
-        (:mod:`~fuelhm_bench.calibration.flags`) held at the input model's values.
+        When the free recalibration puts a value beyond ``absorbed_z`` dispersion sigmas
+        (:mod:`~fuelhm_bench.calibration.flags`), also fit the recalibration and every candidate
+        with all values kept within ``absorbed_z`` sigmas of the input model (the plausible fits),
+        so that an effect the recalibration swallowed has something left to explain.
     max_effects : int, default=3
         Most effects of the forward selection.
     min_step_reduction : float, default=0.2
@@ -186,12 +188,15 @@ class DiscrepancyConfig:
         """The decision rule in words."""
         return (f"accept the candidate with the lowest BIC on the fit flights if its BIC is lower than the "
                 f"recalibrated model's by more than {self.bic_threshold:g} AND it reduces the held-out gap by at "
-                f"least {100 * self.min_gap_reduction:g} % relative to recalibration alone; add further effects "
+                f"least {100 * self.min_gap_reduction:g} % relative to recalibration alone (fitted the same way: "
+                f"free, or -- when the free recalibration absorbs -- within {self.absorbed_z:g} dispersion sigmas, "
+                f"and then also beats the free recalibration's held-out gap); add further effects "
                 f"(forward selection, up to {self.max_effects}) while the BIC improves by more than "
                 f"{self.bic_threshold:g} and the held-out gap shrinks by {100 * self.min_step_reduction:g} %; "
                 f"verdict 'unexplained' when the final held-out gap is >= {self.unexplained_ratio:g}x its noise "
                 f"floor and its misfit score >= {self.unexplained_score:g}, or a value of the final fit lies "
-                f">= {self.absorbed_z:g} dispersion sigmas from the input model; else the set ('effect') or 'none'")
+                f">= {self.absorbed_z:g} dispersion sigmas from the input model (or at that limit in a fit kept "
+                f"within it); else the set ('effect') or 'none'")
 
 
 @dataclass(frozen=True)
@@ -657,24 +662,30 @@ def heldout_models(unit_models: dict, fleet, held_sets: dict) -> dict:
 
 
 def _fit_candidate(cand: EffectCandidate, base: JointFit, fit_sets: dict, held_sets: dict, start_model,
-                   parameters: tuple, iterations: int, curve: CurveConfig) -> tuple[JointFit, float, float]:
+                   parameters: tuple, iterations: int, curve: CurveConfig,
+                   extra_start: tuple | None = None) -> tuple[JointFit, float, float]:
     """Multi-start grid, joint fit, held-out gap. Returns (fit, held-out gap, seconds).
 
     Start points: every grid point of the effect, combined with two sets of unit values --
     the recalibrated ones (which may have drifted to mimic the missing effect) and the input
-    model's. The fit starts from the combination with the lowest RSS.
+    model's -- plus ``extra_start`` (unit values, effect values), e.g. the free fit of the same
+    candidate for a fit kept within the dispersion. Unit values are clipped to the parameters'
+    limits. The fit starts from the combination with the lowest RSS.
     """
     t0 = time.perf_counter()
     origin = {k: {p.path: float(start_model.get(p.path)) for p in parameters} for k in base.unit_models}
+    starts = [(uv, cand.start_values(point)) for uv in (base.unit_values, origin) for point in cand.grid]
+    if extra_start is not None:
+        starts.append((extra_start[0], {**cand.start_values({}), **extra_start[1]}))
     best = None
-    for unit_values in (base.unit_values, origin):
+    for unit_values, values in starts:
+        unit_values = {k: {p.path: p.clip(float(unit_values[k][p.path])) for p in parameters}
+                       for k in base.unit_models}
         units = {k: apply_values(start_model, unit_values[k]) for k in base.unit_models}
-        for point in cand.grid:
-            values = cand.start_values(point)
-            models = {k: _with_effect(m, cand, values) for k, m in units.items()}
-            rss = _rss(models, fit_sets)
-            if best is None or rss < best[0]:
-                best = (rss, values, unit_values, models)
+        models = {k: _with_effect(m, cand, values) for k, m in units.items()}
+        rss = _rss(models, fit_sets)
+        if best is None or rss < best[0]:
+            best = (rss, values, unit_values, models)
     _, values, unit_values, models = best
     shared_start = {p.path: models[next(iter(models))].get(p.path) for p in cand.parameters}
     res = fit_joint(models, fit_sets, parameters, cand.parameters, unit_start=unit_values,
@@ -698,7 +709,7 @@ def _worker_task(effect: str):  # pragma: no cover - runs in worker processes
     w = _WORKER
     cand = next(c for c in w["candidates"] if c.effect == effect)
     res, g, sec = _fit_candidate(cand, w["base"], w["fit_sets"], w["held_sets"], w["start_model"], w["parameters"],
-                                 w["iterations"], w["curve"])
+                                 w["iterations"], w["curve"], w.get("extra_starts", {}).get(effect))
     return effect, res, g, sec
 
 
@@ -720,7 +731,7 @@ def _run_candidates(cands: list, payload: dict, n_jobs: int, progress) -> dict:
     for cand in cands:
         res, g, sec = _fit_candidate(cand, payload["base"], payload["fit_sets"], payload["held_sets"],
                                      payload["start_model"], payload["parameters"], payload["iterations"],
-                                     payload["curve"])
+                                     payload["curve"], payload.get("extra_starts", {}).get(cand.effect))
         out[cand.effect] = (res, g, sec)
         if progress is not None:
             progress(1)
@@ -903,7 +914,11 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         outcomes.append(CandidateOutcome("none", {}, bic_b, bic0 - bic_b, b_base.rss, g_b,
                                          1.0 - g_b / g_recal if g_recal > 0 else 0.0, False, b_base.passes, 0.0,
                                          b_base.unit_values, bounded=True))
-        payload_b = {**payload, "base": b_base, "parameters": b_params}
+        # Extra start of each plausible fit: the free fit of the same candidate (its effect values, its unit
+        # values clipped into the dispersion band).
+        extra = {eff: (res.unit_values, {k.rsplit(".", 1)[-1]: v for k, v in res.shared_values.items()})
+                 for eff, (res, _, _) in results.items()}
+        payload_b = {**payload, "base": b_base, "parameters": b_params, "extra_starts": extra}
         results_b = _run_candidates(cands, payload_b, config.n_jobs, None)
         cur_bounded[0] = True
         outcomes += collect(results_b, (), b_params, bic_b, g_b, "1", bounded=True, free=(bic0, g_recal))
