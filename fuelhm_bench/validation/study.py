@@ -124,12 +124,36 @@ def run_case(case: AltCase, *, n_units: int, n_flights: int, minutes: float, n_j
     }
 
 
+def markdown_table(rows) -> str:
+    """The study table of ``docs/discrepancy.md`` section 10 from the records of :func:`run_case`."""
+    head = ("| case | truth | verdict | set (shares) | equivalents | flags (unit:parameter z) | probe terms (closed) | "
+            "true -> fitted main parameter (error) | held-out gap input -> recal -> final (floor) [mm/s] | "
+            "score recal/final | s |")
+    lines = [head, "|" + "---|" * 11]
+    for r in rows:
+        fitted = r["fitted"]
+        if r["true_value"] == r["true_value"]:  # not NaN
+            err = "" if fitted != fitted else f" ({100 * (fitted / r['true_value'] - 1):+.0f} %)"
+            main = f"{r['true_value']:.3g} -> " + ("-" if fitted != fitted else f"{fitted:.3g}") + err
+        else:
+            main = "-"
+        probe = "-" if r["probe"] in ("-", "") or r["probe"] != r["probe"] else (
+            f"{r['probe']} ({100 * r['probe_closed']:.0f} %)")
+        flags = r["flags"] if isinstance(r["flags"], str) else "-"
+        flags = "; ".join(flags.split("; ")[:4]) + (" ..." if flags.count(";") >= 4 else "")
+        lines.append(
+            f"| {r['case']} | {r['truth']} | `{r['verdict']}` | {r['set']} ({r['shares']}) | {r['equivalents']} | "
+            f"{flags} | {probe} | {main} | {r['gap_before']:.3f} -> {r['gap_recal']:.3f} -> {r['gap_after']:.3f} "
+            f"({r['floor']:.3f}) | {r['score_recal']:.3g}/{r['score_after']:.3g} | {r['seconds']:.0f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     """Command line: run the cases, print and write a CSV table."""
     import pandas as pd
 
     p = argparse.ArgumentParser(prog="python -m fuelhm_bench.validation.study", description=__doc__.splitlines()[0])
-    p.add_argument("--out", required=True, help="CSV file of the cases (refuses to overwrite without --force)")
+    p.add_argument("--out", default=None, help="CSV file of the cases (refuses to overwrite without --force)")
     p.add_argument("--units", type=int, default=4)
     p.add_argument("--flights", type=int, default=3)
     p.add_argument("--minutes", type=float, default=10.0)
@@ -138,9 +162,17 @@ def main(argv=None) -> int:
     p.add_argument("--dump", default=None, help="directory for each case's full diagnostics (JSON)")
     p.add_argument("--seed-offset", type=int, default=0, help="added to every case's seed (held-out replicates)")
     p.add_argument("--force", action="store_true")
+    p.add_argument("--markdown", nargs="*", default=None,
+                   help="only print the markdown table of these CSV files of earlier runs (then --out is ignored)")
     a = p.parse_args(argv)
+    if a.markdown is not None:
+        frames = [pd.read_csv(f) for f in a.markdown]
+        print(markdown_table(pd.concat(frames).to_dict("records")))
+        return 0
     from pathlib import Path
 
+    if not a.out:
+        p.error("--out is required (unless --markdown)")
     out = Path(a.out)
     if out.exists() and not a.force:
         print(f"{out} exists; refusing to overwrite it (pass --force).", file=sys.stderr)
