@@ -161,3 +161,22 @@ def test_forward_selection_names_two_altsim_effects_with_their_shares():
     assert lag.share + play.share == pytest.approx(1.0)
     assert play.gap_after < 0.8 * play.gap_before and play.delta_bic > SMALL.bic_threshold
     assert r.gap_after < 2.0 * r.gap_floor
+
+
+def test_plausible_fit_parameters_are_kept_within_the_dispersion():
+    from fuelhm_bench.calibration.flags import at_limit, within_dispersion
+    from fuelhm_bench.calibration.recalibrate import RECALIBRATION_PARAMETERS
+
+    nominal = LoopModel()
+    narrowed = within_dispersion(RECALIBRATION_PARAMETERS, nominal, 5.0)
+    by_path = {p.path: p for p in narrowed}
+    w = nominal.servovalve.slot_width_outer_m
+    outer = by_path["servovalve.slot_width_outer_m"]
+    assert outer.lower == pytest.approx(w * (1 - 5 * 0.02)) and outer.upper == pytest.approx(w * (1 + 5 * 0.02))
+    # Not dispersed: the documented limits are kept.
+    assert by_path["servovalve.transition_start"] == next(p for p in RECALIBRATION_PARAMETERS
+                                                          if p.path == "servovalve.transition_start")
+    with pytest.raises(ParameterError):
+        within_dispersion(RECALIBRATION_PARAMETERS, nominal, 0.0)
+    values = {0: {"servovalve.slot_width_outer_m": outer.upper}, 1: {"servovalve.slot_width_outer_m": w}}
+    assert at_limit(values, [outer]) == ((0, "servovalve.slot_width_outer_m"),)

@@ -120,6 +120,10 @@ def within_dispersion(parameters, nominal_model, z: float, *, dispersion: Disper
     """
     import dataclasses
 
+    from fuelhm_bench.errors import range_error
+
+    if not (isinstance(z, (int, float)) and math.isfinite(z) and z > 0):
+        raise range_error("within_dispersion z", "a finite number of sigmas > 0", z)
     out = []
     for p in parameters:
         sigma = dispersion_sigma(nominal_model, p.path, dispersion)
