@@ -148,6 +148,39 @@ def markdown_table(rows) -> str:
     return "\n".join(lines)
 
 
+def why_table(dumps) -> str:
+    """Per case, from the ``--dump`` diagnostics: why the truth was (not) named.
+
+    Columns: recalibrated held-out gap and its noise floor, the structural level left by healthy
+    altsim data of the same size (the mean recalibrated gap of the ``healthy`` dumps), the
+    plausible (within-dispersion) recalibration's gap, the truth's candidate (free / plausible): its
+    BIC gain, held-out reduction against the rule's 50 % and fitted main parameter, and the best
+    reduction of a wrong candidate.
+    """
+    healthy = [d["gap_recalibrated"] for d in dumps if d["truth"] == "none"]
+    level = sum(healthy) / len(healthy) if healthy else float("nan")
+    lines = [f"structural level (mean recalibrated held-out gap of {len(healthy)} healthy data sets): {level:.3f} mm/s",
+             "", "| case | verdict | recal gap (floor) | plausible recal gap | truth's candidate: dBIC, held-out "
+             "reduction, fitted main | best wrong candidate: reduction |", "|---|---|---|---|---|---|"]
+    for d in dumps:
+        rk = d["ranking"]
+        bn = [c for c in rk if c["effect"] == "none" and c.get("within_dispersion")]
+        truths = d["truth"].split("+")
+        main = d.get("main")
+        cells = []
+        for c in rk:
+            if c["effect"] in truths:
+                p = c["parameters"].get(main[0], {}).get("value") if main else None
+                cells.append(f"{'plausible' if c.get('within_dispersion') else 'free'} {c['delta_bic']:+.0f}, "
+                             f"{100 * c['gap_reduction']:+.0f} %" + (f", {p:.3g}" if p is not None else ""))
+        wrong = [c for c in rk if c["effect"] not in truths + ["none"]]
+        bw = max(wrong, key=lambda c: c["gap_reduction"]) if wrong else None
+        lines.append(f"| {d['case']} | `{d['verdict']}` | {d['gap_recalibrated']:.3f} ({d['gap_floor_recalibrated']:.3f}) | "
+                     + (f"{bn[0]['gap_after']:.3f}" if bn else "-") + " | " + ("; ".join(cells) or "-") + " | "
+                     + (f"{bw['effect']} {100 * bw['gap_reduction']:+.0f} %" if bw else "-") + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     """Command line: run the cases, print and write a CSV table."""
     import pandas as pd
@@ -162,9 +195,18 @@ def main(argv=None) -> int:
     p.add_argument("--dump", default=None, help="directory for each case's full diagnostics (JSON)")
     p.add_argument("--seed-offset", type=int, default=0, help="added to every case's seed (held-out replicates)")
     p.add_argument("--force", action="store_true")
+    p.add_argument("--why", default=None, help="only print the diagnosis table of a --dump directory")
     p.add_argument("--markdown", nargs="*", default=None,
                    help="only print the markdown table of these CSV files of earlier runs (then --out is ignored)")
     a = p.parse_args(argv)
+    from pathlib import Path
+
+    if a.why:
+        import json
+
+        dumps = [json.loads(f.read_text()) for f in sorted(Path(a.why).glob("*.json"))]
+        print(why_table(dumps))
+        return 0
     if a.markdown is not None:
         frames = [pd.read_csv(f) for f in a.markdown]
         print(markdown_table(pd.concat(frames).to_dict("records")))
