@@ -879,7 +879,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             red = 1.0 - g / ref_gap if ref_gap > 0 else 0.0
             extra = {}
             if free is not None:
-                extra = {"delta_bic_free": free[0] - bic, "gap_reduction_free": 1.0 - g / free[1] if free[1] > 0 else 0.0}
+                extra = {"delta_bic_free": free[0] - bic,
+                         "gap_reduction_free": 1.0 - g / free[1] if free[1] > 0 else 0.0}
             oc = CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, ref_bic - bic, res.rss,
                                   g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag,
                                   bounded=bounded or cur_bounded[0], **extra)

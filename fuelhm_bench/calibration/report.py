@@ -241,7 +241,8 @@ def _discrepancy_markdown(result, model_file: str, data_name: str) -> str:
               f"Noise model: Gaussian residuals, sigma {r.noise.sigma_mm_s:.3f} mm/s (recalibrated model), correlation "
               f"time tau = {r.noise.tau:.1f} samples, n = {r.noise.n}, n_eff = n / tau = {r.noise.n_eff:.0f}; "
               "BIC = n_eff ln(RSS/n) + k ln(n_eff).", "",
-              "| rank | effect | BIC | dBIC vs none (fitted the same way) | held-out gap [mm/s] | reduction vs recalibrated | eligible "
+              "| rank | effect | BIC | dBIC vs none (fitted the same way) | held-out gap [mm/s] | "
+              "reduction vs recalibrated | eligible "
               "| parameters |",
               "|---|---|---|---|---|---|---|---|"]
     for j, c in enumerate(r.ranking, 1):

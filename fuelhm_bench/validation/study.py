@@ -175,7 +175,8 @@ def why_table(dumps) -> str:
                              f"{100 * c['gap_reduction']:+.0f} %" + (f", {p:.3g}" if p is not None else ""))
         wrong = [c for c in rk if c["effect"] not in truths + ["none"]]
         bw = max(wrong, key=lambda c: c["gap_reduction"]) if wrong else None
-        lines.append(f"| {d['case']} | `{d['verdict']}` | {d['gap_recalibrated']:.3f} ({d['gap_floor_recalibrated']:.3f}) | "
+        lines.append(f"| {d['case']} | `{d['verdict']}` | {d['gap_recalibrated']:.3f} "
+                     f"({d['gap_floor_recalibrated']:.3f}) | "
                      + (f"{bn[0]['gap_after']:.3f}" if bn else "-") + " | " + ("; ".join(cells) or "-") + " | "
                      + (f"{bw['effect']} {100 * bw['gap_reduction']:+.0f} %" if bw else "-") + " |")
     return "\n".join(lines)
