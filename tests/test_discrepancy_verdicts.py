@@ -180,3 +180,15 @@ def test_plausible_fit_parameters_are_kept_within_the_dispersion():
         within_dispersion(RECALIBRATION_PARAMETERS, nominal, 0.0)
     values = {0: {"servovalve.slot_width_outer_m": outer.upper}, 1: {"servovalve.slot_width_outer_m": w}}
     assert at_limit(values, [outer]) == ((0, "servovalve.slot_width_outer_m"),)
+
+
+def test_fleet_values_beyond_the_input_models_transition_are_applied():
+    # A fleet mean of fitted widths' transition beyond the input model's end (seen on altsim flow-force
+    # data at 2x in the study) must not fail on the one-at-a-time parameter update.
+    from fuelhm_bench.calibration.fit import apply_values
+
+    m = LoopModel()
+    end = m.servovalve.transition_end
+    r = apply_values(m, {"servovalve.transition_start": end + 0.1, "servovalve.transition_end": end + 0.2})
+    assert r.servovalve.transition_start == pytest.approx(end + 0.1)
+    assert r.servovalve.transition_end == pytest.approx(end + 0.2)
