@@ -3,6 +3,9 @@
 Run as a command (it takes tens of minutes; it is not part of the test run)::
 
     python -m fuelhm_bench.validation.study --out study.csv [--units 4 --flights 3 --minutes 10] [--cases ...]
+        [--seed-offset 1000] [--dump DIR]
+    python -m fuelhm_bench.validation.study --markdown study*.csv     # the table of docs/discrepancy.md
+    python -m fuelhm_bench.validation.study --why DIR                 # per-case diagnosis from --dump
 
 Each case simulates a fleet with :func:`~fuelhm_bench.validation.altsim.simulate_flights`
 (healthy, a library look-alike at 1/3, 1 and 2 times its reference magnitude, an effect
