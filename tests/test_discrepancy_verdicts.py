@@ -7,6 +7,7 @@ model under test: one small test per verdict in the default run.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -119,3 +120,75 @@ def test_verdict_unexplained_on_an_effect_outside_the_library():
     assert out["verdict"] == "unexplained" and out["set"] == []
     assert out["flags"] and out["flags"][0]["reading"] == "likely absorbing a missing effect"
     assert out["probe"]["terms"][0]["term"] == r.probe.terms[0]
+
+
+def test_equivalent_lags_are_reported_with_the_test_that_separates_them():
+    # A 30 ms lag of the coil current behind the recorded command (altsim): the LVDT lag mimics it
+    # (it delays the same transients), less well. With an equivalence margin of 30 points both lags
+    # are reported, with the measurement that tells them apart; with the default 10 points they are not.
+    _, flights = _flights(AltEffects(driver_lag_s=0.03), seed=20)
+    lags = ("lvdt_lag", "current_driver_lag")
+    wide = dataclasses.replace(SMALL, candidates=lags, equivalence_margin=0.3)
+    r = find_discrepancy(flights, config=wide)
+    ranking = [(c.label, round(c.delta_bic), round(c.gap_reduction, 2)) for c in r.ranking]
+    assert r.verdict == "effect" and r.effect_set[0].effect == "current_driver_lag", ranking
+    assert r.parameters["time_constant_s"] == pytest.approx(0.03, rel=0.25)
+    eq = [e for e in r.equivalents if {e.selected, e.alternative} == set(lags)]
+    assert len(eq) == 1, ranking
+    e = eq[0]
+    assert e.reduction_alternative >= e.reduction_selected - 0.3 and e.reduction_alternative >= 0.5
+    assert e.test == separating_test("lvdt_lag", "current_driver_lag") and "coil current" in e.test
+    out = json.loads(json.dumps(r.as_json(), default=float))
+    assert out["equivalents"][0]["alternative"] == "lvdt_lag" and "coil current" in out["equivalents"][0]["test"]
+    # The same candidate fits under the default margin: the driver lag explains clearly more.
+    assert e.reduction_selected - e.reduction_alternative > SMALL.equivalence_margin
+
+
+@pytest.mark.slow
+def test_forward_selection_names_two_altsim_effects_with_their_shares():
+    # An LVDT lag of 50 ms and a torque-motor play of 0.3 mA at once (altsim laws): the lag is added
+    # first, the play second (its own held-out reduction on top of the lag), shares summing to one.
+    _, flights = _flights(AltEffects(lvdt_lag_s=0.05, hysteresis_a=3e-4), seed=41)
+    cfg = dataclasses.replace(SMALL, candidates=("lvdt_lag", "torque_motor_hysteresis", "spool_overlap"))
+    r = find_discrepancy(flights, config=cfg)
+    ranking = [(c.label, c.tag, round(c.delta_bic), round(c.gap_reduction, 2)) for c in r.ranking]
+    assert r.verdict == "effect", (r.unexplained, ranking)
+    assert [m.effect for m in r.effect_set] == ["lvdt_lag", "torque_motor_hysteresis"], ranking
+    lag, play = r.effect_set
+    assert lag.parameters["time_constant_s"] == pytest.approx(0.05, rel=0.25)
+    assert 0.0 < play.parameters["width_a"] < 1e-3
+    assert lag.share > play.share > 0.05
+    assert lag.share + play.share == pytest.approx(1.0)
+    assert play.gap_after < 0.8 * play.gap_before and play.delta_bic > SMALL.bic_threshold
+    assert r.gap_after < 2.0 * r.gap_floor
+
+
+def test_plausible_fit_parameters_are_kept_within_the_dispersion():
+    from fuelhm_bench.calibration.flags import at_limit, within_dispersion
+    from fuelhm_bench.calibration.recalibrate import RECALIBRATION_PARAMETERS
+
+    nominal = LoopModel()
+    narrowed = within_dispersion(RECALIBRATION_PARAMETERS, nominal, 5.0)
+    by_path = {p.path: p for p in narrowed}
+    w = nominal.servovalve.slot_width_outer_m
+    outer = by_path["servovalve.slot_width_outer_m"]
+    assert outer.lower == pytest.approx(w * (1 - 5 * 0.02)) and outer.upper == pytest.approx(w * (1 + 5 * 0.02))
+    # Not dispersed: the documented limits are kept.
+    assert by_path["servovalve.transition_start"] == next(p for p in RECALIBRATION_PARAMETERS
+                                                          if p.path == "servovalve.transition_start")
+    with pytest.raises(ParameterError):
+        within_dispersion(RECALIBRATION_PARAMETERS, nominal, 0.0)
+    values = {0: {"servovalve.slot_width_outer_m": outer.upper}, 1: {"servovalve.slot_width_outer_m": w}}
+    assert at_limit(values, [outer]) == ((0, "servovalve.slot_width_outer_m"),)
+
+
+def test_fleet_values_beyond_the_input_models_transition_are_applied():
+    # A fleet mean of fitted widths' transition beyond the input model's end (seen on altsim flow-force
+    # data at 2x in the study) must not fail on the one-at-a-time parameter update.
+    from fuelhm_bench.calibration.fit import apply_values
+
+    m = LoopModel()
+    end = m.servovalve.transition_end
+    r = apply_values(m, {"servovalve.transition_start": end + 0.1, "servovalve.transition_end": end + 0.2})
+    assert r.servovalve.transition_start == pytest.approx(end + 0.1)
+    assert r.servovalve.transition_end == pytest.approx(end + 0.2)

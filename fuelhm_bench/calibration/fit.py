@@ -111,6 +111,10 @@ def apply_values(model, values: Mapping[str, float]):
     te = values.get("servovalve.transition_end", model.servovalve.transition_end)
     if te < ts + 0.01:
         values["servovalve.transition_end"] = min(ts + 0.01, 1.0)
+    if "servovalve.transition_end" in values and ts > model.servovalve.transition_end:
+        # Parameters are set one at a time: move the end first when the new start lies beyond the
+        # model's current end (e.g. a fleet mean of values fitted far from the input model).
+        values = {"servovalve.transition_end": values.pop("servovalve.transition_end"), **values}
     return model.with_parameters(values)
 
 

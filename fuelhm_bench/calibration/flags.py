@@ -101,4 +101,55 @@ def absorbing_parameters(unit_values: dict, nominal_model, *, dispersion: Disper
     return tuple(sorted(flags, key=lambda f: -abs(f.z)))
 
 
-__all__ = ["ParameterFlag", "Z_MAX", "absorbing_parameters", "dispersion_sigma"]
+def within_dispersion(parameters, nominal_model, z: float, *, dispersion: Dispersion = Dispersion()) -> tuple:
+    """The fit parameters with their limits narrowed to ``z`` dispersion sigmas around the input model.
+
+    A fit with these parameters cannot absorb a missing effect into values that no manufactured
+    unit has (the *plausible* recalibration); parameters without a dispersion keep their limits.
+
+    Parameters
+    ----------
+    parameters : sequence of FitParameter
+        Fit parameters (their ``lower``/``upper`` are intersected with the dispersion band).
+    nominal_model : LoopModel
+        The input model (the population's centre).
+    z : float
+        Half-width of the band [sigmas], > 0.
+    dispersion : Dispersion
+        Manufacturing dispersion of the population.
+    """
+    import dataclasses
+
+    from fuelhm_bench.errors import range_error
+
+    if not (isinstance(z, (int, float)) and math.isfinite(z) and z > 0):
+        raise range_error("within_dispersion z", "a finite number of sigmas > 0", z)
+    out = []
+    for p in parameters:
+        sigma = dispersion_sigma(nominal_model, p.path, dispersion)
+        if not sigma:
+            out.append(p)
+            continue
+        centre = float(nominal_model.get(p.path))
+        lo, hi = max(p.lower, centre - z * sigma), min(p.upper, centre + z * sigma)
+        if p.log:
+            lo = max(lo, p.lower, 1e-300)
+        out.append(dataclasses.replace(p, lower=lo, upper=hi))
+    return tuple(out)
+
+
+def at_limit(unit_values: dict, parameters, *, rel: float = 1e-3) -> tuple:
+    """(unit, path) pairs whose value sits at a limit of its (narrowed) fit parameter."""
+    hits = []
+    for unit, values in unit_values.items():
+        for p in parameters:
+            if p.path not in values or not (math.isfinite(p.lower) and math.isfinite(p.upper)):
+                continue
+            tol = rel * (p.upper - p.lower)
+            v = float(values[p.path])
+            if v <= p.lower + tol or v >= p.upper - tol:
+                hits.append((unit, p.path))
+    return tuple(hits)
+
+
+__all__ = ["ParameterFlag", "Z_MAX", "absorbing_parameters", "at_limit", "dispersion_sigma", "within_dispersion"]

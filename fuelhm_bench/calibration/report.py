@@ -241,12 +241,13 @@ def _discrepancy_markdown(result, model_file: str, data_name: str) -> str:
               f"Noise model: Gaussian residuals, sigma {r.noise.sigma_mm_s:.3f} mm/s (recalibrated model), correlation "
               f"time tau = {r.noise.tau:.1f} samples, n = {r.noise.n}, n_eff = n / tau = {r.noise.n_eff:.0f}; "
               "BIC = n_eff ln(RSS/n) + k ln(n_eff).", "",
-              "| rank | effect | BIC | dBIC vs none | held-out gap [mm/s] | reduction vs recalibrated | eligible "
+              "| rank | effect | BIC | dBIC vs none (fitted the same way) | held-out gap [mm/s] | "
+              "reduction vs recalibrated | eligible "
               "| parameters |",
               "|---|---|---|---|---|---|---|---|"]
     for j, c in enumerate(r.ranking, 1):
         params = ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
-        lines.append(f"| {j} | `{c.effect}` | {c.bic:.1f} | {c.delta_bic:.1f} | {c.gap_after:.3f} | "
+        lines.append(f"| {j} | `{c.label}` | {c.bic:.1f} | {c.delta_bic:.1f} | {c.gap_after:.3f} | "
                      f"{100 * c.gap_reduction:+.0f} % | {'yes' if c.eligible else 'no'} | {params} |")
     lines += ["", "## Curves (held-out flights)", "", "![curves](curves.png)", "",
               "## Residual maps", "", "Mean residual (measured - model) per current bin and current direction:", "",

@@ -3,6 +3,9 @@
 Run as a command (it takes tens of minutes; it is not part of the test run)::
 
     python -m fuelhm_bench.validation.study --out study.csv [--units 4 --flights 3 --minutes 10] [--cases ...]
+        [--seed-offset 1000] [--dump DIR]
+    python -m fuelhm_bench.validation.study --markdown study*.csv     # the table of docs/discrepancy.md
+    python -m fuelhm_bench.validation.study --why DIR                 # per-case diagnosis from --dump
 
 Each case simulates a fleet with :func:`~fuelhm_bench.validation.altsim.simulate_flights`
 (healthy, a library look-alike at 1/3, 1 and 2 times its reference magnitude, an effect
@@ -14,6 +17,7 @@ probe's terms, the gaps and the fitted main parameter.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from dataclasses import dataclass
@@ -66,16 +70,45 @@ def default_cases() -> list[AltCase]:
     return cases
 
 
-def run_case(case: AltCase, *, n_units: int, n_flights: int, minutes: float, n_jobs: int = 2) -> dict:
-    """Simulate one case and run the workflow; a flat record of the outcome."""
+def diagnostics(r) -> dict:
+    """Everything the decision rule reads, per candidate (for re-deciding offline and for the docs)."""
+    import numpy as np
+
+    from fuelhm_bench.calibration.curve import gap, gap_noise_floor
+    from fuelhm_bench.calibration.discrepancy import correlation_time
+
+    v = r.v_heldout["recalibrated"]
+    floor_recal = gap_noise_floor(r.heldout, v, r.curve, correlation_time([r.heldout], [v]))
+    out = r.as_json()
+    out["gap_floor_recalibrated"] = floor_recal
+    out["curve_rms"] = gap(r.heldout, np.zeros_like(v), r.curve)
+    out["ranking_units"] = [{"effect": c.effect, "held": list(c.held), "tag": c.tag,
+                             "unit_values": {str(k): v for k, v in c.unit_values.items()}} for c in r.ranking]
+    return out
+
+
+def run_case(case: AltCase, *, n_units: int, n_flights: int, minutes: float, n_jobs: int = 2,
+             dump: str | None = None) -> dict:
+    """Simulate one case and run the workflow; a flat record of the outcome (``dump``: a directory that
+    receives the case's full diagnostics as JSON)."""
+    import json
+    from pathlib import Path
+
     from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy
     from fuelhm_bench.io import split_flights
 
     frame = simulate_flights(case.effects, n_units=n_units, n_flights=n_flights, minutes=minutes, seed=case.seed)
     flights, _ = split_flights(frame)
     t0 = time.perf_counter()
+    c0 = time.process_time()
     r = find_discrepancy(flights, config=DiscrepancyConfig(n_jobs=n_jobs, seed=case.seed))
     seconds = time.perf_counter() - t0
+    if dump:
+        Path(dump).mkdir(parents=True, exist_ok=True)
+        d = {"case": case.name, "truth": case.truth, "main": list(case.main) if case.main else None,
+             "seconds": seconds, "cpu_seconds": time.process_time() - c0, **diagnostics(r)}
+        (Path(dump) / (case.name.replace(" ", "_").replace("/", "_").replace(":", "") + ".json")).write_text(
+            json.dumps(d, default=str))
     named = [m.effect for m in r.effect_set]
     fitted = float("nan")
     if case.main is not None and case.truth in named:
@@ -94,21 +127,98 @@ def run_case(case: AltCase, *, n_units: int, n_flights: int, minutes: float, n_j
     }
 
 
+def markdown_table(rows) -> str:
+    """The study table of ``docs/discrepancy.md`` section 10 from the records of :func:`run_case`."""
+    head = ("| case | truth | verdict | set (shares) | equivalents | flags (unit:parameter z) | probe terms (closed) | "
+            "true -> fitted main parameter (error) | held-out gap input -> recal -> final (floor) [mm/s] | "
+            "score recal/final | s |")
+    lines = [head, "|" + "---|" * 11]
+    for r in rows:
+        fitted = r["fitted"]
+        if r["true_value"] == r["true_value"]:  # not NaN
+            err = "" if fitted != fitted else f" ({100 * (fitted / r['true_value'] - 1):+.0f} %)"
+            main = f"{r['true_value']:.3g} -> " + ("-" if fitted != fitted else f"{fitted:.3g}") + err
+        else:
+            main = "-"
+        probe = "-" if r["probe"] in ("-", "") or r["probe"] != r["probe"] else (
+            f"{r['probe']} ({100 * r['probe_closed']:.0f} %)")
+        flags = r["flags"] if isinstance(r["flags"], str) else "-"
+        flags = "; ".join(flags.split("; ")[:4]) + (" ..." if flags.count(";") >= 4 else "")
+        lines.append(
+            f"| {r['case']} | {r['truth']} | `{r['verdict']}` | {r['set']} ({r['shares']}) | {r['equivalents']} | "
+            f"{flags} | {probe} | {main} | {r['gap_before']:.3f} -> {r['gap_recal']:.3f} -> {r['gap_after']:.3f} "
+            f"({r['floor']:.3f}) | {r['score_recal']:.3g}/{r['score_after']:.3g} | {r['seconds']:.0f} |")
+    return "\n".join(lines)
+
+
+def why_table(dumps) -> str:
+    """Per case, from the ``--dump`` diagnostics: why the truth was (not) named.
+
+    Columns: recalibrated held-out gap and its noise floor, the structural level left by healthy
+    altsim data of the same size (the mean recalibrated gap of the ``healthy`` dumps), the
+    plausible (within-dispersion) recalibration's gap, the truth's candidate (free / plausible): its
+    BIC gain, held-out reduction against the rule's 50 % and fitted main parameter, and the best
+    reduction of a wrong candidate.
+    """
+    healthy = [d["gap_recalibrated"] for d in dumps if d["truth"] == "none"]
+    level = sum(healthy) / len(healthy) if healthy else float("nan")
+    lines = [f"structural level (mean recalibrated held-out gap of {len(healthy)} healthy data sets): {level:.3f} mm/s",
+             "", "| case | verdict | recal gap (floor) | plausible recal gap | truth's candidate: dBIC, held-out "
+             "reduction, fitted main | best wrong candidate: reduction |", "|---|---|---|---|---|---|"]
+    for d in dumps:
+        rk = d["ranking"]
+        bn = [c for c in rk if c["effect"] == "none" and c.get("within_dispersion")]
+        truths = d["truth"].split("+")
+        main = d.get("main")
+        cells = []
+        for c in rk:
+            if c["effect"] in truths:
+                p = c["parameters"].get(main[0], {}).get("value") if main else None
+                cells.append(f"{'plausible' if c.get('within_dispersion') else 'free'} {c['delta_bic']:+.0f}, "
+                             f"{100 * c['gap_reduction']:+.0f} %" + (f", {p:.3g}" if p is not None else ""))
+        wrong = [c for c in rk if c["effect"] not in truths + ["none"]]
+        bw = max(wrong, key=lambda c: c["gap_reduction"]) if wrong else None
+        lines.append(f"| {d['case']} | `{d['verdict']}` | {d['gap_recalibrated']:.3f} "
+                     f"({d['gap_floor_recalibrated']:.3f}) | "
+                     + (f"{bn[0]['gap_after']:.3f}" if bn else "-") + " | " + ("; ".join(cells) or "-") + " | "
+                     + (f"{bw['effect']} {100 * bw['gap_reduction']:+.0f} %" if bw else "-") + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     """Command line: run the cases, print and write a CSV table."""
     import pandas as pd
 
     p = argparse.ArgumentParser(prog="python -m fuelhm_bench.validation.study", description=__doc__.splitlines()[0])
-    p.add_argument("--out", required=True, help="CSV file of the cases (refuses to overwrite without --force)")
+    p.add_argument("--out", default=None, help="CSV file of the cases (refuses to overwrite without --force)")
     p.add_argument("--units", type=int, default=4)
     p.add_argument("--flights", type=int, default=3)
     p.add_argument("--minutes", type=float, default=10.0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--cases", default="", help="comma-separated substrings of case names (default: all)")
+    p.add_argument("--dump", default=None, help="directory for each case's full diagnostics (JSON)")
+    p.add_argument("--seed-offset", type=int, default=0, help="added to every case's seed (held-out replicates)")
     p.add_argument("--force", action="store_true")
+    p.add_argument("--why", default=None, help="only print the diagnosis table of a --dump directory")
+    p.add_argument("--markdown", nargs="*", default=None,
+                   help="only print the markdown table of these CSV files of earlier runs (then --out is ignored)")
     a = p.parse_args(argv)
     from pathlib import Path
 
+    if a.why:
+        import json
+
+        dumps = [json.loads(f.read_text()) for f in sorted(Path(a.why).glob("*.json"))]
+        print(why_table(dumps))
+        return 0
+    if a.markdown is not None:
+        frames = [pd.read_csv(f) for f in a.markdown]
+        print(markdown_table(pd.concat(frames).to_dict("records")))
+        return 0
+    from pathlib import Path
+
+    if not a.out:
+        p.error("--out is required (unless --markdown)")
     out = Path(a.out)
     if out.exists() and not a.force:
         print(f"{out} exists; refusing to overwrite it (pass --force).", file=sys.stderr)
@@ -119,7 +229,9 @@ def main(argv=None) -> int:
         cases = [c for c in cases if any(k in c.name for k in keys)]
     rows = []
     for c in cases:
-        rec = run_case(c, n_units=a.units, n_flights=a.flights, minutes=a.minutes, n_jobs=a.jobs)
+        if a.seed_offset:
+            c = dataclasses.replace(c, seed=c.seed + a.seed_offset)
+        rec = run_case(c, n_units=a.units, n_flights=a.flights, minutes=a.minutes, n_jobs=a.jobs, dump=a.dump)
         rows.append(rec)
         print(" | ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in rec.values()), flush=True)
         pd.DataFrame(rows).to_csv(out, index=False)
