@@ -53,6 +53,12 @@ def test_split_training_holds_out_half_the_units():
     assert set(cal["unit_id"]) == {5, 6, 7, 8} and set(fit["unit_id"]) == {0, 1, 2, 3, 4}
     fit1, cal1 = split_training(table[table["unit_id"] < 3])  # low_data's 3 units: 2 fit, 1 calibrates
     assert set(cal1["unit_id"]) == {2} and set(fit1["unit_id"]) == {0, 1}
+    # the extended indicators are optional columns; the paper's row is required
+    from fuelhm_bench.errors import DataFormatError
+
+    assert "V_in1" not in fit.columns
+    with pytest.raises(DataFormatError, match=r"without \['X1_valid'\]"):
+        split_training(table.drop(columns=["X1_valid"]))
 
 
 def test_many_calibration_units_put_the_false_alarm_rate_near_the_gaussian_tail():

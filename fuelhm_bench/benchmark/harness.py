@@ -192,8 +192,20 @@ def split_training(train: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
 
     Only the columns of an observation row are kept (no ``n_points`` / ``quality_reason``: the
     environment does not observe them), so a method sees the same columns in training and scoring.
+    The extended indicators are kept when the table has them (tables of the paper's ten only, e.g.
+    from an older cache or a user, are split as they are).
+
+    Raises
+    ------
+    DataFormatError
+        A column of the paper's observation row (ids, the ten indicators, their flags) is missing.
     """
-    train = train[list(_ROW_INDEX)]
+    base = list(_ROW_INDEX[:3 + 2 * len(INDICATOR_NAMES)])
+    missing = [c for c in base if c not in train.columns]
+    if missing:
+        raise DataFormatError(f"The healthy training table must have the columns {base}. "
+                              f"Got a table without {missing} instead.")
+    train = train[[c for c in _ROW_INDEX if c in train.columns]]
     units = list(dict.fromkeys(train["unit_id"]))
     n_cal = max(1, len(units) // 2) if len(units) > 1 else 0
     cal_mask = train["unit_id"].isin(set(units[len(units) - n_cal:]))
