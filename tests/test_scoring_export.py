@@ -68,3 +68,8 @@ def test_score_distribution_figure(tmp_path):
     assert any("internal_leakage" in t for t in labels_text)
     path = save_figure(fig, tmp_path / "fig10.png")
     assert path.stat().st_size > 1000 and path.read_bytes()[:4] == b"\x89PNG"
+    import matplotlib.pyplot as plt
+
+    assert plt.fignum_exists(fig.number)  # kept by default: the caller may still draw on it
+    save_figure(fig, tmp_path / "fig10.svg", close=True)  # batch writers release each figure
+    assert not plt.fignum_exists(fig.number) and (tmp_path / "fig10.svg").stat().st_size > 1000

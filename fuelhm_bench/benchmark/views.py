@@ -172,7 +172,7 @@ def _method_report(store, out: Path, task) -> None:
         run = Run(labels=labels, decisions=decisions, healthy_scores=healthy, name=task.method)
         card = score_run(run)
         write_tables(card, mdir, overwrite=True)
-        save_figure(plot_score_distributions(run, card.config), mdir / "score_distributions.png")
+        save_figure(plot_score_distributions(run, card.config), mdir / "score_distributions.png", close=True)
         from fuelhm_bench.scoring.bootstrap import scorecard_intervals
         from fuelhm_bench.scoring.calibration import guilt_calibration, plot_reliability
 
@@ -180,7 +180,7 @@ def _method_report(store, out: Path, task) -> None:
             mdir / "headline_intervals.csv", index=False)
         reliability = guilt_calibration(card.flights)["reliability"]
         reliability.to_csv(mdir / "reliability.csv", index=False)
-        save_figure(plot_reliability({task.method: reliability}), mdir / "reliability.png")
+        save_figure(plot_reliability({task.method: reliability}), mdir / "reliability.png", close=True)
         decisions.to_csv(mdir / "decisions.csv", index=False)
         store.artifact(task.key, "episodes").to_csv(mdir / "episodes.csv", index=False)
         nominal = store.artifact(task.key, "nominal_decisions")

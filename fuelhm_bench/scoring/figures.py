@@ -87,9 +87,17 @@ def plot_score_distributions(run: Run, config: ScoringConfig | None = None, *, b
     return fig
 
 
-def save_figure(fig: Figure, path: str | Path, *, dpi: int = 120) -> Path:
-    """Save a figure (format from the extension, e.g. .png, .pdf, .svg); returns the path."""
+def save_figure(fig: Figure, path: str | Path, *, dpi: int = 120, close: bool = False) -> Path:
+    """Save a figure (format from the extension, e.g. .png, .pdf, .svg); returns the path.
+
+    With ``close=True`` the figure is also closed (released by pyplot): batch writers that draw one
+    figure per entry pass it, so a long run does not keep every figure in memory.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi)
+    if close:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
     return path
