@@ -70,6 +70,10 @@ def test_score_distribution_figure(tmp_path):
     assert path.stat().st_size > 1000 and path.read_bytes()[:4] == b"\x89PNG"
     import matplotlib.pyplot as plt
 
-    assert plt.fignum_exists(fig.number)  # kept by default: the caller may still draw on it
-    save_figure(fig, tmp_path / "fig10.svg", close=True)  # batch writers release each figure
-    assert not plt.fignum_exists(fig.number) and (tmp_path / "fig10.svg").stat().st_size > 1000
+    save_figure(fig, tmp_path / "fig10.svg", close=True)  # not a pyplot figure: closing is harmless
+    assert (tmp_path / "fig10.svg").stat().st_size > 1000
+    pyplot_fig, _ = plt.subplots()  # e.g. plot_reliability's figure, drawn once per leaderboard entry
+    save_figure(pyplot_fig, tmp_path / "a.png")
+    assert plt.fignum_exists(pyplot_fig.number)  # kept by default: the caller may still draw on it
+    save_figure(pyplot_fig, tmp_path / "b.png", close=True)  # batch writers release each figure
+    assert not plt.fignum_exists(pyplot_fig.number)
