@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -113,6 +114,27 @@ def test_dask_loopback_cluster_runs_the_board(small_board, tmp_path):
     pd.testing.assert_frame_equal(local[cols], dask[cols])
     with ResultStore(tmp_path / "dask" / "results.sqlite") as store:
         assert store.keys() == {t.key for t in plan_tasks(small_board)}
+
+
+def test_raw_signal_method_gets_a_leaderboard_row(small_board, tmp_path):
+    """The raw-signal baseline from the config file to a stored, scored row (physics: it gets its flights);
+    at surrogate fidelity its row says why it was refused, and the other entry's row is unaffected."""
+    import dataclasses
+
+    from fuelhm_bench.benchmark.leaderboard import LeaderboardEntry
+
+    raw = LeaderboardEntry("fuelhm_baselines.raw_tracking:RawTrackingMethod")
+    board = dataclasses.replace(small_board, methods=(small_board.methods[0], raw))
+    rows = run_board(board, tmp_path / "physics", flight_minutes=FLIGHT_MINUTES, log=lambda s: None)
+    got = rows.set_index("method")
+    assert got.loc["fuelhm_baselines.raw_tracking:RawTrackingMethod", "status"] == "ok"
+    assert np.isfinite(got.loc["fuelhm_baselines.raw_tracking:RawTrackingMethod", "summary_score"])
+    surrogate = dataclasses.replace(board, fidelity="surrogate")
+    rows = run_board(surrogate, tmp_path / "surrogate", flight_minutes=FLIGHT_MINUTES,
+                     log=lambda s: None).set_index("method")
+    assert rows.loc["fuelhm_baselines.raw_tracking:RawTrackingMethod", "status"] == "refused"
+    assert "raw" in rows.loc["fuelhm_baselines.raw_tracking:RawTrackingMethod", "message"]
+    assert rows.loc["fuelhm_baselines.trivial:NullMethod", "status"] == "ok"
 
 
 @pytest.mark.slow  # about 2 minutes on the loaded 2-core machine (three runs of a subprocess leaderboard)
