@@ -374,8 +374,6 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
     pandas.DataFrame
         The table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
     """
-    from fuelhm_bench.datasets.fleets import fleet_indicators
-
     sc = resolve_scenario(scenario)
     _check_minutes(flight_minutes, "training_indicators")
     config = _with_minutes(sc.training_fleet_config(), flight_minutes)
@@ -384,15 +382,8 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
     drifted = bool(drifted) and bool(sc.drift)
     config = dataclasses.replace(config, n_units=units, n_flights=flights,
                                  **({"nominal": sc.drifted_model()} if drifted else {}))
-    params = {"units": units, "flights": flights, "drifted": drifted}
-    key = cache_key("training", sc, flight_minutes=flight_minutes, **params)
-
-    def make() -> dict[str, pd.DataFrame]:
-        return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
-
-    table = _cached(key, _entry(cache_dir, "training", sc, key), ("table",), make, lambda t: t["table"],
-                    {"scenario": sc.id, "kind": "training", "flight_minutes": flight_minutes, **params})
-    return table.copy()
+    return _fleet_table("training", sc, config, {"units": units, "flights": flights, "drifted": drifted},
+                        flight_minutes, cache_dir, progress, workers)
 
 
 def scored_indicators(scenario, *, flight_minutes: float | None = None, units: int | None = None,
@@ -423,22 +414,27 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
     pandas.DataFrame
         The indicator table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
     """
-    from fuelhm_bench.datasets.fleets import fleet_indicators
-
     sc = resolve_scenario(scenario)
     _check_minutes(flight_minutes, "scored_indicators")
     config = _with_minutes(sc.test_fleet_config(), flight_minutes)
     units = config.n_units if units is None else units
     drifted = bool(drifted) or not sc.drift
     config = dataclasses.replace(config, n_units=units, **({} if drifted else {"nominal": sc.truth_model()}))
-    params = {"units": units, "drifted": drifted}
-    key = cache_key("scored", sc, flight_minutes=flight_minutes, **params)
+    return _fleet_table("scored", sc, config, {"units": units, "drifted": drifted}, flight_minutes, cache_dir,
+                        progress, workers)
+
+
+def _fleet_table(kind: str, sc, config, params: dict, flight_minutes, cache_dir, progress, workers) -> pd.DataFrame:
+    """The indicator table of one simulated fleet (``kind`` "training" or "scored"), cached; a copy."""
+    from fuelhm_bench.datasets.fleets import fleet_indicators
+
+    key = cache_key(kind, sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
         return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
 
-    table = _cached(key, _entry(cache_dir, "scored", sc, key), ("table",), make, lambda t: t["table"],
-                    {"scenario": sc.id, "kind": "scored", "flight_minutes": flight_minutes, **params})
+    table = _cached(key, _entry(cache_dir, kind, sc, key), ("table",), make, lambda t: t["table"],
+                    {"scenario": sc.id, "kind": kind, "flight_minutes": flight_minutes, **params})
     return table.copy()
 
 

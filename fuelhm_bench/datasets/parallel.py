@@ -22,6 +22,7 @@ order.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import multiprocessing
 import os
 import sys
@@ -103,10 +104,8 @@ def _terminate(workers: int) -> None:
     if pool is None:
         return
     for process in list((getattr(pool, "_processes", None) or {}).values()):
-        try:
+        with contextlib.suppress(OSError, AttributeError):  # already gone
             process.kill()
-        except (OSError, AttributeError):  # already gone
-            pass
     pool.shutdown(wait=False, cancel_futures=True)
 
 

@@ -40,6 +40,7 @@ Every failure is reported as a :class:`SealedFailure` with a ``status``
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -360,14 +361,10 @@ class SealedMethod:
     def close(self) -> None:
         """Kill the method's whole process group and remove its scratch directory."""
         if self._proc is not None:
-            try:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(self._proc.pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
-            try:
+            with contextlib.suppress(subprocess.TimeoutExpired):
                 self._proc.wait(5)
-            except subprocess.TimeoutExpired:
-                pass
         if self._conn is not None:
             self._conn.close()
             self._conn = None
@@ -509,10 +506,8 @@ class SealedMethod:
 
     def _dead(self, phase: str) -> SealedFailure:
         code = None
-        try:
+        with contextlib.suppress(subprocess.TimeoutExpired):
             code = self._proc.wait(5)
-        except subprocess.TimeoutExpired:
-            pass
         self.close()
         if code is not None and code < 0:
             sig = -code

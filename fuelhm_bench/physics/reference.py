@@ -128,18 +128,17 @@ def simulate_reference(model, inputs: FlightInputs, rng: np.random.Generator, *,
 
         hit_play.terminal = hit_stop.terminal = True
         hit_play.direction = hit_stop.direction = 1.0
-        t0, cur, mode = 0.0, s, None
+        t0, cur = 0.0, s
+        # the first segment's mode from the state; later ones are set by the event ending the previous one
+        if abs(e0) <= dz:
+            mode = "stuck"
+        elif sgn * cur[0] >= spool_stroke:
+            mode = "stop"
+        elif sgn * (cur[0] - cur[1]) < half_play:
+            mode = "free"
+        else:
+            mode = "engaged"
         for _ in range(4):  # at most stuck | free -> engaged -> stop
-            if mode is not None:
-                pass  # set by the event that ended the previous segment
-            elif abs(e0) <= dz:
-                mode = "stuck"
-            elif sgn * cur[0] >= spool_stroke:
-                mode = "stop"
-            elif sgn * (cur[0] - cur[1]) < half_play:
-                mode = "free"
-            else:
-                mode = "engaged"
             events = {"free": [hit_play, hit_stop], "engaged": [hit_stop]}.get(mode)
 
             def rhs_mode(tt, st, mode=mode):
