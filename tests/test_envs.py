@@ -378,6 +378,7 @@ def test_knowledge_cache_memory_disk_and_fresh_build_agree(tmp_path):
     from fuelhm_bench.datasets.cache import knowledge_build
 
     sc = small_scenario()
+    clear_memory_cache()  # the knowledge is keyed by its recipe: another test may hold this one in memory
     first = published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path)
     assert published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path) is first
     entries = list((tmp_path / "fuelhm-v1").iterdir())
