@@ -6,6 +6,8 @@ must leave every product bit-identical. Run it on the reference tree and on the 
     PYTHONPATH=<reference checkout> python tests/pipeline_identity.py dump /tmp/ref
     python tests/pipeline_identity.py check /tmp/ref
 
+    python tests/pipeline_identity.py cost       # CPU ms per flight-hour of a scored fleet, in this tree
+
 ``dump`` writes one ``.npz`` per product (every column as an array, text columns as strings);
 ``check`` rebuilds them in this tree and reports the first differing column of each (exit 1 on any).
 It covers healthy training fleets, scored fleets with faulty units (drifted and not), a degraded sensor,
@@ -60,7 +62,37 @@ def _arrays(table: pd.DataFrame) -> dict[str, np.ndarray]:
     return out
 
 
+def cost(repeats: int = 5) -> None:
+    """Print the CPU cost of 16 flights of paper_2012's scored fleet (25 min) built in this process, per flight-hour
+    (the smallest and the median of ``repeats`` builds, after a warm-up; page faults and system time included)."""
+    import dataclasses
+    import resource
+    import time
+
+    from fuelhm_bench.datasets.cache import resolve_scenario
+    from fuelhm_bench.datasets.fleets import fleet_indicators
+
+    config = dataclasses.replace(resolve_scenario("paper_2012").test_fleet_config(), n_units=2, n_flights=8)
+    fleet_indicators(dataclasses.replace(config, n_units=1, n_flights=1,
+                                         mission=dataclasses.replace(config.mission, duration_s=180.0)))
+    before = resource.getrusage(resource.RUSAGE_SELF)
+    costs = []
+    for _ in range(repeats):
+        start = time.process_time()
+        fleet_indicators(config)
+        costs.append(time.process_time() - start)
+    after = resource.getrusage(resource.RUSAGE_SELF)
+    hours = 16 * config.mission.duration_s / 3600.0
+    costs.sort()
+    print(f"{1e3 * costs[0] / hours:.1f} ms CPU per flight-hour (median {1e3 * costs[len(costs) // 2] / hours:.1f}; "
+          f"{(after.ru_minflt - before.ru_minflt) / (16 * repeats):.0f} page faults and "
+          f"{1e3 * (after.ru_stime - before.ru_stime) / (hours * repeats):.1f} ms system time per flight-hour)")
+
+
 def main(argv: list[str]) -> int:
+    if argv[0] == "cost":
+        cost()
+        return 0
     mode, folder = argv[0], Path(argv[1])
     folder.mkdir(parents=True, exist_ok=True)
     bad = 0
