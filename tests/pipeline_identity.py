@@ -85,7 +85,7 @@ def cost(repeats: int = 5) -> None:
     hours = 16 * config.mission.duration_s / 3600.0
     costs.sort()
     print(f"{1e3 * costs[0] / hours:.1f} ms CPU per flight-hour (median {1e3 * costs[len(costs) // 2] / hours:.1f}; "
-          f"{(after.ru_minflt - before.ru_minflt) / (16 * repeats):.0f} page faults and "
+          f"{(after.ru_minflt - before.ru_minflt) / (16 * repeats):.0f} page faults per flight and "
           f"{1e3 * (after.ru_stime - before.ru_stime) / (hours * repeats):.1f} ms system time per flight-hour)")
 
 
