@@ -85,3 +85,16 @@ def test_ctrl_c_ends_the_workers_and_the_next_call_starts_afresh():
             time.sleep(0.05)
         assert p.exitcode is not None, f"worker {p.pid} still running 10 s after Ctrl-C"
     assert run_ordered(_square_plus, [(k, 0) for k in range(3)], workers=2) == [0, 1, 4]
+
+
+def test_allocator_is_tuned_once_per_process():
+    """On glibc the heap keeps freed flight-sized arrays (fewer page faults); the call is idempotent and harmless."""
+    import platform
+    import subprocess
+    import sys
+
+    code = ("from fuelhm_bench.datasets.parallel import tune_allocator; "
+            "print(tune_allocator(), tune_allocator())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    glibc = sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"
+    assert out == (["True", "False"] if glibc else ["False", "False"])

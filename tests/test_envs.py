@@ -378,10 +378,11 @@ def test_knowledge_cache_memory_disk_and_fresh_build_agree(tmp_path):
     from fuelhm_bench.datasets.cache import knowledge_build
 
     sc = small_scenario()
+    clear_memory_cache()  # the knowledge is keyed by its recipe: another test may hold this one in memory
     first = published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path)
     assert published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path) is first
     entries = list((tmp_path / "fuelhm-v1").iterdir())
-    assert len(entries) == 1 and entries[0].name.startswith("knowledge-paper_2012-v3-")
+    assert len(entries) == 1 and entries[0].name.startswith("knowledge-")  # keyed by its recipe: shared
     clear_memory_cache()
     from_disk = published_knowledge(sc, flight_minutes=MINUTES, size=SMALL, cache_dir=tmp_path)
     fresh = build_knowledge(knowledge_build(sc, flight_minutes=MINUTES, size=SMALL))
@@ -408,9 +409,34 @@ def test_cache_key_tracks_content_not_description():
     assert cache_key("knowledge", dataclasses.replace(sc, seeds=dataclasses.replace(sc.seeds, master=8))) != key
 
 
+def test_scenarios_flying_the_same_fleet_share_one_build(tmp_path):
+    from fuelhm_bench.datasets.cache import content_key
+
+    clear_memory_cache()
+    sc = small_scenario()
+    other = dataclasses.replace(sc, name="same_fleet_other_name", description="another story",
+                                costs=dataclasses.replace(sc.costs, repair_kusd=sc.costs.repair_kusd + 1.0))
+    first = training_indicators(sc, flight_minutes=MINUTES, units=2, flights=2, cache_dir=tmp_path)
+    built = sorted(p.name for p in (tmp_path / "fuelhm-v1").iterdir())
+    clear_memory_cache()  # the disk entry alone serves the other scenario
+    shared = training_indicators(other, flight_minutes=MINUTES, units=2, flights=2, cache_dir=tmp_path)
+    pd.testing.assert_frame_equal(shared, first)
+    assert sorted(p.name for p in (tmp_path / "fuelhm-v1").iterdir()) == built and built[0].startswith("fleet-")
+    # any change of the fleet's recipe is another entry
+    config = sc.training_fleet_config()
+    key = content_key("fleet", config)
+    assert content_key("fleet", dataclasses.replace(config, seed=config.seed + 1)) != key
+    assert content_key("fleet", dataclasses.replace(
+        config, mission=dataclasses.replace(config.mission, n2_noise_std=0.003))) != key
+    assert content_key("fleet", dataclasses.replace(config, nominal=config.nominal.with_effect(
+        "viscosity_temperature"))) != key
+    assert content_key("fleet", config) == key
+
+
 def test_cache_location_from_environment_and_memory_only(tmp_path, monkeypatch):
     monkeypatch.setenv("FUELHM_BENCH_CACHE", str(tmp_path / "env-cache"))
     assert default_cache_dir() == tmp_path / "env-cache"
+    clear_memory_cache()  # fleets are keyed by content: another test may have built this one in memory
     sc = small_scenario(name="elsewhere")
     table = training_indicators(sc, flight_minutes=MINUTES, units=2, flights=2)
     assert len(table) == 4 and (tmp_path / "env-cache" / "fuelhm-v1").is_dir()

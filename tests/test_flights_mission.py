@@ -73,3 +73,30 @@ def test_cruise_current_scatter_comes_from_sensor_and_loop(flights):
         s_real, s_ideal = _cruise_scatter_ma(real, inp), _cruise_scatter_ma(perfect, inp)
         assert 0.010 < s_real < 0.030, s_real
         assert s_ideal < 0.8 * s_real
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_first_order_filter_is_lfilter_bit_for_bit(seed):
+    """The compiled recursion of MissionProfile.sample gives scipy.signal.lfilter's bytes (the flights' N2 depends on it)."""
+    from scipy.signal import lfilter
+
+    from fuelhm_bench.flights.mission import first_order_filter
+
+    r = np.random.default_rng(seed)
+    n = int(r.integers(1, 3000))
+    x = r.normal(size=n) * 10 ** r.uniform(-5, 3)
+    x[r.integers(0, n, 3)] = 0.0
+    pole = float(np.exp(-r.uniform(1e-4, 2.0)))
+    gain = 1.0 - pole if seed % 2 else 1.0
+    z0 = 0.0 if seed % 5 == 0 else float(r.normal())
+    expected = lfilter([gain], [1.0, -pole], x, zi=[z0])[0]
+    assert first_order_filter(x, gain, pole, z0).tobytes() == expected.tobytes()
+
+
+def test_demand_from_n2_takes_scalars_and_arrays():
+    n2 = np.array([0.3, 0.55, 0.8, 1.0, 1.2])
+    expected = MISSION.sweep_low_m + np.clip((n2 - MISSION.schedule_n2_low) / (
+        MISSION.schedule_n2_high - MISSION.schedule_n2_low), 0.0, 1.0) * (MISSION.sweep_high_m - MISSION.sweep_low_m)
+    assert MISSION.demand_from_n2(n2).tobytes() == expected.tobytes()
+    assert MISSION.demand_from_n2(0.8) == expected[2] and np.ndim(MISSION.demand_from_n2(0.8)) == 0
+    assert MISSION.demand_from_n2(n2) is not n2 and n2[0] == 0.3  # the input is not modified

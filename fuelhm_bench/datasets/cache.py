@@ -17,12 +17,19 @@ The environments and the runner need, for a scenario:
 Each costs from seconds to tens of seconds of simulation. They are kept
 
 * in memory, per process, keyed by a SHA-256 (:func:`cache_key`);
-* on disk, under ``<cache dir>/fuelhm-v1/<kind>-<scenario id>-<key[:16]>/``:
+* on disk, under ``<cache dir>/fuelhm-v1/<kind>-<scenario id>-<key[:16]>/``
+  (``<kind>-<key[:16]>/`` for the products shared by scenarios, below):
   the simulated tables as Parquet and ``meta.json``. Fitted objects (healthy
   model, ITL, signatures) are refitted from the tables on load (milliseconds,
   deterministic), so the cache holds data only, never pickled code.
 
-The key covers the kind of product, the scenario's content (every field of
+Fleet tables (:func:`training_indicators`, :func:`scored_indicators`) and the
+published knowledge are keyed by their recipe alone (:func:`content_key`: the
+:class:`~fuelhm_bench.flights.fleet.FleetConfig` or the
+:class:`~fuelhm_bench.datasets.knowledge.KnowledgeBuild`, every field), so
+scenarios flying the same fleet share one build: ``low_data`` scores
+``paper_2012``'s fleet, ``robustness_drift`` trains on it, and both use its
+published knowledge. The other products' key (:func:`cache_key`) covers the kind of product, the scenario's content (every field of
 :meth:`Scenario.to_dict <fuelhm_bench.scenarios.Scenario>` except
 ``description``), the effective flight duration, the build parameters, the
 package version, the cache format and the indicator names (a table without a new indicator is
@@ -53,7 +60,7 @@ from fuelhm_bench._numba_cache import CACHE_ENV_VAR  # the variable overriding t
 from fuelhm_bench.errors import ParameterError, parameter_error
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "default_cache_dir",
+__all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", "content_key", "default_cache_dir",
            "knowledge_build", "published_knowledge", "resolve_scenario", "scored_indicators",
            "surrogate_doe", "surrogate_healthy", "surrogate_knowledge", "training_indicators"]
 
@@ -253,6 +260,51 @@ def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **par
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
+def _canonical(value):
+    """``value`` as JSON-ready data that names every dataclass's class and holds every field and array element."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {"__class__": f"{type(value).__module__}.{type(value).__qualname__}",
+                **{f.name: _canonical(getattr(value, f.name)) for f in dataclasses.fields(value)}}
+    if isinstance(value, (list, tuple)):
+        return [_canonical(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _canonical(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return {"__ndarray__": value.dtype.str, "shape": list(value.shape), "data": _canonical(value.tolist())}
+    if isinstance(value, np.generic):
+        return value.item()
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return {"__repr__": f"{type(value).__module__}.{type(value).__qualname__}", "value": repr(value)}
+
+
+def content_key(kind: str, recipe, **params) -> str:
+    """SHA-256 hex digest of a product built from ``recipe`` alone (a frozen dataclass such as a
+    :class:`~fuelhm_bench.flights.fleet.FleetConfig`), whichever scenario asks for it.
+
+    Scenarios whose recipes are equal (e.g. two scenarios flying the same training fleet)
+    share one cache entry, so the product is simulated once. The key covers the recipe's
+    every field (classes named, floats exact), the build parameters, the package version,
+    the cache format and the indicator names.
+
+    Parameters
+    ----------
+    kind : str
+        ``"fleet"`` or ``"knowledge"``.
+    recipe : dataclass
+        Everything the product depends on.
+    **params
+        Further build parameters (JSON-serialisable).
+    """
+    from fuelhm_bench import __version__
+    from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES
+
+    material = {"kind": kind, "format": _FORMAT, "package": __version__, "recipe": _canonical(recipe),
+                "params": params, "indicators": list(ALL_INDICATOR_NAMES)}
+    text = json.dumps(material, sort_keys=True, allow_nan=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def default_cache_dir() -> Path:
     """The cache directory used when none is given: the project's user cache directory
     (:func:`fuelhm_bench._numba_cache.user_cache_dir`, which also holds numba's caches)."""
@@ -267,10 +319,11 @@ def clear_memory_cache() -> None:
 
 
 def _entry(cache_dir, kind: str, sc, key: str) -> Path | None:
+    """The entry folder of a product; ``sc`` None for a product shared by scenarios (:func:`content_key`)."""
     if cache_dir is False:
         return None
     directory = Path(default_cache_dir() if cache_dir is None else cache_dir)
-    return directory / f"fuelhm-v{_FORMAT}" / f"{kind}-{sc.id}-{key[:16]}"
+    return directory / f"fuelhm-v{_FORMAT}" / (f"{kind}-{key[:16]}" if sc is None else f"{kind}-{sc.id}-{key[:16]}")
 
 
 def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callable[[], dict[str, pd.DataFrame]],
@@ -333,8 +386,8 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
               "healthy_units": size.healthy_units, "healthy_flights": size.healthy_flights}
     if size.doe_modes != MODE_IDS:  # (the key of the full design is unchanged by this field)
         params["doe_modes"] = list(size.doe_modes)
-    key = cache_key("knowledge", sc, flight_minutes=flight_minutes, **params)
     build = knowledge_build(sc, flight_minutes=flight_minutes, size=size)
+    key = content_key("knowledge", build)  # scenarios with the same published model, mission and sensor share it
 
     def make() -> dict[str, pd.DataFrame]:
         result = build_knowledge(build, progress=progress, workers=workers)
@@ -343,7 +396,7 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     def finish(tables: dict[str, pd.DataFrame]):
         return _refit(tables["healthy"], tables["doe"], dict(build.max_intensity))
 
-    return _cached(key, _entry(cache_dir, "knowledge", sc, key), ("healthy", "doe"), make, finish,
+    return _cached(key, _entry(cache_dir, "knowledge", None, key), ("healthy", "doe"), make, finish,
                    {"scenario": sc.id, "kind": "knowledge", "flight_minutes": flight_minutes, **params})
 
 
@@ -425,15 +478,18 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
 
 
 def _fleet_table(kind: str, sc, config, params: dict, flight_minutes, cache_dir, progress, workers) -> pd.DataFrame:
-    """The indicator table of one simulated fleet (``kind`` "training" or "scored"), cached; a copy."""
+    """The indicator table of one simulated fleet (``kind`` "training" or "scored"), cached; a copy.
+
+    The table depends on ``config`` only, so it is keyed by it (:func:`content_key`): scenarios
+    flying the same fleet (``low_data`` scores ``paper_2012``'s) share one entry, whatever ``kind``."""
     from fuelhm_bench.datasets.fleets import fleet_indicators
 
-    key = cache_key(kind, sc, flight_minutes=flight_minutes, **params)
+    key = content_key("fleet", config)
 
     def make() -> dict[str, pd.DataFrame]:
         return {"table": fleet_indicators(config, progress=progress, workers=workers)[0]}
 
-    table = _cached(key, _entry(cache_dir, kind, sc, key), ("table",), make, lambda t: t["table"],
+    table = _cached(key, _entry(cache_dir, "fleet", None, key), ("table",), make, lambda t: t["table"],
                     {"scenario": sc.id, "kind": kind, "flight_minutes": flight_minutes, **params})
     return table.copy()
 

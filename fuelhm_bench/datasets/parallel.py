@@ -32,10 +32,49 @@ from concurrent.futures.process import BrokenProcessPool
 
 from fuelhm_bench.errors import ParameterError
 
-__all__ = ["check_workers", "default_workers", "run_ordered", "submit", "warm_up"]
+__all__ = ["check_workers", "default_workers", "run_ordered", "submit", "tune_allocator", "warm_up"]
 
 _POOLS: dict[int, ProcessPoolExecutor] = {}
 _WARM = False
+_TUNED = False
+#: glibc allocator settings of a process building simulated data (:func:`tune_allocator`).
+MMAP_THRESHOLD_BYTES = 32 * 2**20
+TRIM_THRESHOLD_BYTES = 256 * 2**20
+
+
+def tune_allocator() -> bool:
+    """Keep freed flight-sized arrays in this process's heap instead of returning them to the system (glibc only).
+
+    A batch of flights allocates and frees arrays of one to tens of megabytes many
+    times over. With glibc's default policy each is mapped afresh (or the heap is
+    trimmed and regrown), and every first write to a page is a page fault: about
+    1,900 faults per 25-minute flight and a fifth of the CPU time spent in the
+    kernel. Here arrays up to ``MMAP_THRESHOLD_BYTES`` come from the heap and up to
+    ``TRIM_THRESHOLD_BYTES`` of free heap is kept for the next batch (about 360
+    faults per flight). Only speed changes: no number depends on where memory comes
+    from. Called once per process by :func:`run_ordered` and by the workers.
+
+    Returns
+    -------
+    bool
+        Whether the settings were applied (False off glibc, or when already applied).
+    """
+    global _TUNED
+    if _TUNED or not sys.platform.startswith("linux"):
+        return False
+    _TUNED = True
+    import ctypes
+    import platform
+
+    if platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        m_trim_threshold, m_mmap_threshold = -1, -3  # <malloc.h>
+        return bool(libc.mallopt(m_mmap_threshold, MMAP_THRESHOLD_BYTES)) and bool(
+            libc.mallopt(m_trim_threshold, TRIM_THRESHOLD_BYTES))
+    except (OSError, AttributeError):  # pragma: no cover - no usable libc
+        return False
 
 
 def default_workers() -> int:
@@ -96,6 +135,7 @@ def _worker_init() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    tune_allocator()
 
 
 def _terminate(workers: int) -> None:
@@ -140,6 +180,7 @@ def run_ordered(fn: Callable, tasks: Sequence[tuple], *, workers: int = 1, sizes
         The results, in the order of ``tasks``.
     """
     sizes = [1] * len(tasks) if sizes is None else list(sizes)
+    tune_allocator()
     if workers <= 1 or len(tasks) <= 1 or not _can_have_children():
         out = []
         for t, n in zip(tasks, sizes):

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from numba import njit
+
 from fuelhm_bench.errors import range_error
 from fuelhm_bench.physics._validation import NON_NEGATIVE, POSITIVE, check_fields
 from fuelhm_bench.physics.simulate import FlightInputs
@@ -42,6 +44,25 @@ PHASES: tuple[tuple[str, float, float], ...] = (
     ("taxi_in", 0.05, 0.60),
 )
 PHASE_NAMES: tuple[str, ...] = ("engine_start",) + tuple(p[0] for p in PHASES)
+
+
+@njit(cache=True, nogil=True)
+def first_order_filter(x: np.ndarray, gain: float, pole: float, z0: float) -> np.ndarray:
+    """``scipy.signal.lfilter([gain], [1, -pole], x, zi=[z0])[0]``, bit for bit, without its overheads.
+
+    The transposed direct form II recursion of ``lfilter`` with the same operations in the same
+    order (``y = z + gain x``, then ``z = 0 x - (-pole) y``; compiled without fast-math, so
+    nothing is contracted or reordered): ``y[k] = pole y[k-1] + gain x[k]``.
+    """
+    y = np.empty(x.shape[0])
+    a1 = -pole
+    z = z0
+    for k in range(x.shape[0]):
+        xk = x[k]
+        yk = z + gain * xk
+        z = 0.0 * xk - a1 * yk
+        y[k] = yk
+    return y
 
 
 @dataclass(frozen=True)
@@ -134,8 +155,14 @@ class MissionProfile:
 
     def demand_from_n2(self, n2: np.ndarray) -> np.ndarray:
         """Scheduled position demand [m] for engine speed ``n2`` [-]."""
-        frac = np.clip((n2 - self.schedule_n2_low) / (self.schedule_n2_high - self.schedule_n2_low), 0.0, 1.0)
-        return self.sweep_low_m + frac * (self.sweep_high_m - self.sweep_low_m)
+        # One buffer, updated in place (the same operations in the same order as
+        # ``low + clip((n2 - a) / (b - a), 0, 1) * (high - low)``: bit for bit, without temporaries).
+        out = np.asarray(np.subtract(n2, self.schedule_n2_low))  # a new array (0-d for a scalar)
+        np.divide(out, self.schedule_n2_high - self.schedule_n2_low, out=out)
+        np.clip(out, 0.0, 1.0, out=out)
+        np.multiply(out, self.sweep_high_m - self.sweep_low_m, out=out)
+        np.add(out, self.sweep_low_m, out=out)
+        return out[()] if out.ndim == 0 else out
 
     def _test_sweep(self, n_start: int) -> np.ndarray:
         """Demand [m] of the engine-start test sweep: ramps up and down at each rate, then hold."""
@@ -167,7 +194,6 @@ class MissionProfile:
         """
         T = self.frame_s
         n = self.n_frames
-        t = np.arange(n) * T
         n_start = min(int(round(self.start_duration_s / T)), n)
         # Phase set points after the start, with durations jittered by +/-20 %.
         shares = np.array([p[1] for p in PHASES]) * rng.uniform(0.8, 1.2, len(PHASES))
@@ -194,23 +220,29 @@ class MissionProfile:
         target[land + int(3 / T): land + int(15 / T)] = 0.85
         # Slow band-limited fluctuation of the speed demand after the start: first-order
         # Gauss-Markov process (exact discrete update, stationary std n2_noise_std).
-        from scipy.signal import lfilter
-
         if self.n2_noise_std > 0.0 and n > n_start:
             b = np.exp(-T / self.n2_noise_time_constant_s)
             drive = rng.normal(0.0, self.n2_noise_std * np.sqrt(1.0 - b * b), n - n_start)
             start = b * rng.normal(0.0, self.n2_noise_std)  # stationary initial state
-            target[n_start:] += lfilter([1.0], [1.0, -b], drive, zi=[start])[0]
+            target[n_start:] += first_order_filter(drive, 1.0, float(b), float(start))
         # HP spool: first-order lag behind the speed demand (exact discrete update).
         a = np.exp(-T / self.engine_time_constant_s)
-        n2 = np.clip(lfilter([1 - a], [1, -a], target, zi=[a * target[0]])[0], 0.0, 1.15)
+        n2 = first_order_filter(target, float(1 - a), float(a), float(a * target[0]))
+        np.clip(n2, 0.0, 1.15, out=n2)
         demand = self.demand_from_n2(n2)
         if self.test_sweep and n_start > 0:
             demand[:n_start] = self._test_sweep(n_start)
         temp0 = self.fuel_temp_start_degc + rng.normal(0.0, 8.0)
         temp1 = self.fuel_temp_end_degc + rng.normal(0.0, 8.0)
         tau = 0.3 * self.duration_s
-        fuel_temp = temp1 + (temp0 - temp1) * np.exp(-t / tau)
+        # temp1 + (temp0 - temp1) * exp(-t / tau) with t = k T, in one buffer (same operations, same bits).
+        fuel_temp = np.arange(n, dtype=np.float64)  # exact integers, as np.arange(n) converted for the product
+        np.multiply(fuel_temp, T, out=fuel_temp)
+        np.negative(fuel_temp, out=fuel_temp)
+        np.divide(fuel_temp, tau, out=fuel_temp)
+        np.exp(fuel_temp, out=fuel_temp)
+        np.multiply(fuel_temp, temp0 - temp1, out=fuel_temp)
+        np.add(fuel_temp, temp1, out=fuel_temp)
         extras = {
             "n2_pct": 100.0 * n2,
             "fuel_temp_degC": fuel_temp,
