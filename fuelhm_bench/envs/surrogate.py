@@ -29,7 +29,8 @@ The indicators are every column ``c`` of the tables that has a ``c_valid``
 companion (the ten of Table I, and any extended indicator the extractor adds:
 all are learnt and drawn alike). A unit's flights are then drawn as::
 
-    I[flight] = mean + A z + u + r[flight] + sum_m D_m(f_m[flight]; z)
+    I[flight] = mean + A z + u + r[flight] + sum_m [D_m(f_m[flight]; z) + d_m[flight](f_m[flight])]
+                + sum_{a<b} X_ab(f_a[flight], f_b[flight])
 
 1. ``mean + A z``: the unit mean at its coordinates, a ridge regression of the
    physics units' means on ``[1, z]`` (intercept not penalised). Without
@@ -57,9 +58,23 @@ all are learnt and drawn alike). A unit's flights are then drawn as::
    unit-to-unit spread are those of the DOE. A DOE flight
    that made an indicator invalid makes it invalid in the surrogate (between
    two DOE intensities the nearer one's pattern is used with a probability
-   given by the distance). Simultaneous modes add their responses. A mode the
-   DOE did not fly (the cached DOE flies the scenario's modes only) is not
-   learnt: an intensity of it is refused (:attr:`SurrogateModel.learnt`).
+   given by the distance). A mode the DOE did not fly (the cached DOE flies
+   the scenario's modes only) is not learnt: an intensity of it is refused
+   (:attr:`SurrogateModel.learnt`). When the DOE flew each unit on several
+   missions (column ``replicate``), ``D_m`` is regressed on a unit's mean
+   response over its missions.
+5. ``d_m[flight]``: the flight-to-flight part of a response. Each DOE unit's
+   response on one mission minus its mean over its missions (inflated by
+   ``sqrt(n / (n - 1))``) forms a pool (:attr:`SurrogateModel.response_flight`);
+   every degraded flight draws one row of it per active mode, piecewise linear
+   in the intensity like ``D_m``.
+6. ``X_ab``: the interaction of two simultaneous modes, from DOE flights of the
+   pair (mode ``"a+b"``, intensities ``intensity`` and ``intensity_2``):
+   ``I(a+b) - I(a) - I(b) + I(healthy)`` of a DOE unit on one mission (the
+   single responses interpolated between knots), averaged over missions,
+   kept per DOE unit (the one drawn for ``a``); bilinear between the pair
+   intensities, 0 when either mode is at 0, held beyond the largest. Three or
+   more modes add their pairs' interactions.
 
 Estimation error. Everything is estimated from a finite physics sample, and
 the fitted surrogate says how much (:attr:`SurrogateModel.fit_info`,
@@ -71,13 +86,11 @@ flights repeats each of the ``R`` pooled rows about ``n / R`` times (the
 residuals are combined with fresh unit effects and responses, so whole
 flights are not repeated).
 
-What the surrogate does not reproduce: interactions between simultaneous
-modes (their responses add), flight-to-flight variation of a mode's response
-(the DOE flies one mission per unit, so a unit's response is the same on
-every flight at a given intensity: this is what backlash, whose limit cycle
-depends on the flight, misses most), non-linear dependence of the unit mean or
-of a response on the coordinates, dependence of a response on the flight's
-conditions beyond what the DOE unit drawn carries, correlation between
+What the surrogate does not reproduce: interactions of three or more modes
+beyond their pairs', indicators lost only when two modes act together, the
+link between a flight's healthy residual and its response deviation (drawn
+independently; the physics flies both on one mission), non-linear dependence
+of the unit mean or of a response on the coordinates, correlation between
 consecutive flights of a unit beyond the shared unit effect, and a Gaussian
 shape for the unexplained unit part (its covariance is kept, its shape is not).
 Faults outside the seven modes are not modelled.
