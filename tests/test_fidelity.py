@@ -71,6 +71,12 @@ def test_noise_seed_must_differ_from_the_run_seed(tiny):
                        flight_minutes=2.0, knowledge_size=KnowledgeSize.small(), cache_dir=cache)
 
 
+def test_cli_rejects_a_noise_seed_equal_to_the_run_seed(tmp_path):
+    code = main(["fidelity", "--scenario", "paper_2012", "--seed", "7", "--noise-seed", "7",
+                 "--out", str(tmp_path / "o")])
+    assert code == 2
+
+
 def test_failures_name_every_missed_target(report):
     assert report.passed == (not report.failures)
     line = report.summary()

@@ -322,6 +322,14 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
     if not isinstance(methods, dict) or len(methods) < 2:
         raise ParameterError(f"The 'methods' parameter of fidelity_check must be a dict of at least two named "
                              f"methods (a ranking needs two). Got {methods!r:.100} instead.")
+    if noise_seed is not None:  # checked before any run
+        if isinstance(noise_seed, bool) or not isinstance(noise_seed, (int, np.integer)) or noise_seed < 0:
+            raise ParameterError(f"The 'noise_seed' parameter of fidelity_check must be an int >= 0 or None. "
+                                 f"Got {noise_seed!r} instead.")
+        reference = sc.seeds.master if seed is None else seed
+        if int(noise_seed) == int(reference):
+            raise ParameterError(f"The 'noise_seed' parameter of fidelity_check must differ from the master seed "
+                                 f"of the run ({reference}); two runs with one seed are the same run.")
     outcomes, seconds = {}, {}
     for fid in FIDELITIES:
         t0 = time.perf_counter()
@@ -332,13 +340,6 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
     report = compare_outcomes(sc.id, outcomes, seconds=seconds)
     if noise_seed is None:
         return report
-    if isinstance(noise_seed, bool) or not isinstance(noise_seed, (int, np.integer)) or noise_seed < 0:
-        raise ParameterError(f"The 'noise_seed' parameter of fidelity_check must be an int >= 0 or None. "
-                             f"Got {noise_seed!r} instead.")
-    reference = sc.seeds.master if seed is None else seed
-    if int(noise_seed) == int(reference):
-        raise ParameterError(f"The 'noise_seed' parameter of fidelity_check must differ from the master seed "
-                             f"of the run ({reference}); two runs with one seed are the same run.")
     label = f"physics_seed{int(noise_seed)}"
     t0 = time.perf_counter()
     other = _run_panel(methods, sc, "physics", seed=int(noise_seed), scale=scale, flight_minutes=flight_minutes,
