@@ -691,9 +691,8 @@ class SurrogateModel:
                 np.maximum(i0, 0, out=i0)
                 out = out + curve[i0] + (f - grid[i0])[:, None] * slopes[i0]
                 if self._flight_pool:  # this flight's deviation from the unit's mean response
-                    dev = self.response_flight[parts["deviations"][:, j], j]  # (n, q + 1, p)
-                    rows = np.arange(len(f))
-                    lo, hi = dev[rows, i0], dev[rows, i0 + 1]
+                    pool, pick = self.response_flight[:, j], parts["deviations"][:, j]
+                    lo, hi = pool[pick, i0], pool[pick, i0 + 1]  # (n, p) each
                     w = ((f - grid[i0]) / (grid[i0 + 1] - grid[i0]))[:, None]
                     out = out + lo + w * (hi - lo)
                 if lossy[d, j]:
