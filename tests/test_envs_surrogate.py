@@ -296,3 +296,83 @@ def test_every_learnt_column_is_drawn_and_addressable_by_name(model):
     assert j.tolist() == [4] and np.all(valid[:, j]) and np.all(np.isfinite(values[:, j]))
     with pytest.raises(DataFormatError, match=r"not learnt on the indicator\(s\) \['V_in9'\]"):
         model.columns(["EXT", "V_in9"])
+
+
+def doe_missions_table(seed=3, n_units=8, missions=3, knots=(0.5, 1.0), spread=0.5, pairs=False):
+    """Each unit flies every case on ``missions`` missions. m1 moves A by (2 + e) f, where e ~ N(0, spread^2)
+    is drawn per (unit, mission): the flight-to-flight part of the response. With ``pairs``, m1 and m2
+    together add 3 f1 f2 to D on top of the two single responses (m2 moves D by 4 f)."""
+    rng = np.random.default_rng(seed)
+    rows, units, mode, intensity, second, rep = [], [], [], [], [], []
+    cases = [("healthy", 0.0, 0.0)] + [(m, f, 0.0) for m in MODES for f in knots]
+    if pairs:
+        cases += [("m1+m2", fa, fb) for fa in knots for fb in knots]
+    for u in range(n_units):
+        base = rng.standard_normal(5)
+        for r in range(missions):
+            h = base + 0.3 * rng.standard_normal(5)
+            e = spread * rng.standard_normal()
+            for md, f, f2 in cases:
+                x = h.copy()
+                fa = f if md in ("m1", "m1+m2") else 0.0
+                fb = f if md == "m2" else (f2 if md == "m1+m2" else 0.0)
+                x[0] += (2.0 + e) * fa
+                x[3] += 4.0 * fb + (3.0 * fa * fb if md == "m1+m2" else 0.0)
+                x[2] = 0.5 * (x[0] + x[1])
+                rows.append(x)
+                units.append(u)
+                mode.append(md)
+                intensity.append(f)
+                second.append(f2)
+                rep.append(r)
+    extra = {"replicate": rep, "mode": mode, "intensity": intensity}
+    if pairs:
+        extra["intensity_2"] = second
+    x = np.array(rows)
+    return _table(x, np.ones_like(x, dtype=bool), np.array(units), extra)
+
+
+def test_several_missions_give_the_flight_to_flight_part_of_a_response():
+    h = healthy_table(n_units=20, n_flights=4)
+    model = fit_surrogate(h, doe_missions_table(n_units=40), modes=MODES, bootstrap=0)
+    assert model.response_flight.shape == (40 * 3, 2, 3, 5) and model.fit_info["doe_missions"] == 3
+    pool = model.response_flight[:, 0, 2, 0]  # deviations of the response of A to m1 at f = 1
+    assert abs(np.sqrt(np.mean(pool ** 2)) - 0.5) < 0.1  # the missions' spread, 0.5 (80 degrees of freedom)
+    at = np.zeros((4000, 2))
+    at[:, 0] = 1.0
+    rng = np.random.default_rng(5)
+    parts = model.draw_parts(rng, len(at))
+    values, _ = model.degrade(parts, at)
+    healthy, _ = model.degrade(parts, np.zeros_like(at))
+    response = values[:, 0] - healthy[:, 0]  # one unit: its mean response, plus a deviation per flight
+    assert abs(response.std() / np.sqrt(np.mean(pool ** 2)) - 1.0) < 0.05  # the drawn spread is the pool's
+    assert np.all(values[:, 3] == healthy[:, 3])  # m1 does not move D, on any flight
+    # a one-mission DOE has no flight-to-flight part: the response is the same on every flight
+    one = fit_surrogate(h, doe_missions_table(missions=1), modes=MODES, bootstrap=0)
+    parts = one.draw_parts(np.random.default_rng(5), 50)
+    diff = one.degrade(parts, at[:50])[0][:, 0] - one.degrade(parts, np.zeros((50, 2)))[0][:, 0]
+    np.testing.assert_allclose(diff, diff[0])
+
+
+def test_pairs_flown_together_give_the_interaction_of_simultaneous_modes():
+    h = healthy_table(n_units=20, n_flights=4)
+    model = fit_surrogate(h, doe_missions_table(pairs=True, spread=0.0), modes=MODES, bootstrap=0)
+    assert model.pairs == (("m1", "m2"),) and model.pair_knots.tolist() == [0.5, 1.0]
+    np.testing.assert_allclose(model.interactions[:, 0, 2, 2, 3], 3.0, atol=1e-9)  # 3 f1 f2 at (1, 1)
+    np.testing.assert_allclose(model.interactions[:, 0, 0, :, :], 0.0)
+    parts = model.draw_parts(np.random.default_rng(2), 4)
+    f = np.array([[1.0, 1.0], [0.75, 1.0], [1.0, 0.0], [0.0, 0.5]])
+    both = model.degrade(parts, f)[0][:, 3]
+    alone = sum(model.degrade(parts, np.where(np.arange(2) == j, f, 0.0))[0][:, 3] for j in range(2))
+    healthy = model.degrade(parts, np.zeros_like(f))[0][:, 3]
+    extra = both - alone + healthy  # what the pair adds to the two single responses
+    np.testing.assert_allclose(extra, [3.0, 2.25, 0.0, 0.0], atol=1e-9)  # bilinear between knots, 0 alone
+
+
+def test_tail_keeps_the_units_draws_for_its_later_flights(model):
+    parts = model.draw_parts(np.random.default_rng(4), 6)
+    f = np.tile([[0.5, 0.25]], (6, 1))
+    whole = model.degrade(parts, f)
+    later = model.degrade(model.tail(parts, 2), f[2:])
+    np.testing.assert_array_equal(whole[0][2:], later[0])
+    np.testing.assert_array_equal(whole[1][2:], later[1])

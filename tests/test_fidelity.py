@@ -33,7 +33,7 @@ def report(tiny):
     path, cache = tiny
     methods = {"null": NullMethod(), "paper": PaperMahalanobis(cv=None), "full": FullGaussianMethod(cv=2)}
     return fidelity_check(path, methods=methods, flight_minutes=2.0, knowledge_size=KnowledgeSize.small(),
-                          cache_dir=cache, timeout_s=120)
+                          cache_dir=cache, timeout_s=120, noise_seed=12345)
 
 
 def test_report_compares_the_same_methods_at_both_fidelities(report):
@@ -47,6 +47,34 @@ def test_report_compares_the_same_methods_at_both_fidelities(report):
     assert set(report.modes["method"]) <= {"null", "paper", "full"}
     assert {"detection_diff", "fcr_diff"} <= set(report.modes.columns)
     assert set(report.seconds) == {"physics", "surrogate"}
+
+
+def test_noise_floor_compares_two_physics_runs(report):
+    noise = report.noise_floor
+    assert noise is not None and noise.labels == ("physics", "physics_seed12345")
+    m = noise.methods.set_index("method")
+    # the reference run is the fidelity check's own physics run
+    np.testing.assert_array_equal(m["summary_physics"], report.methods.set_index("method")["summary_physics"])
+    np.testing.assert_allclose(m["summary_diff"], m["summary_physics_seed12345"] - m["summary_physics"])
+    assert (m["status_physics_seed12345"] == "ok").all()
+    assert m.loc["null", "summary_physics_seed12345"] == 0.0
+    assert set(noise.seconds) == {"physics", "physics_seed12345"} and noise.noise_floor is None
+    line = report.summary()
+    assert line["noise_max_summary_diff"] == pytest.approx(m["summary_diff"].abs().max(), abs=0.051)
+    assert "Noise floor" in report.to_markdown()
+
+
+def test_noise_seed_must_differ_from_the_run_seed(tiny):
+    path, cache = tiny
+    with pytest.raises(ParameterError, match="must differ from the master seed"):
+        fidelity_check(path, methods={"null": NullMethod(), "null2": NullMethod()}, seed=3, noise_seed=3,
+                       flight_minutes=2.0, knowledge_size=KnowledgeSize.small(), cache_dir=cache)
+
+
+def test_cli_rejects_a_noise_seed_equal_to_the_run_seed(tmp_path):
+    code = main(["fidelity", "--scenario", "paper_2012", "--seed", "7", "--noise-seed", "7",
+                 "--out", str(tmp_path / "o")])
+    assert code == 2
 
 
 def test_failures_name_every_missed_target(report):
@@ -63,7 +91,9 @@ def test_targets_are_those_of_the_benchmark():
 
 def test_report_writes_tables_markdown_and_figure(report, tmp_path):
     paths = report.write(tmp_path / "out")
-    assert [p.name for p in paths] == ["methods.csv", "modes.csv", "report.md", "fidelity.png"]
+    assert [p.name for p in paths[:4]] == ["methods.csv", "modes.csv", "report.md", "fidelity.png"]
+    assert [p.relative_to(tmp_path / "out").as_posix() for p in paths[4:]] == [
+        f"noise_floor/{n}" for n in ("methods.csv", "modes.csv", "report.md", "fidelity.png")]
     assert all(p.stat().st_size > 0 for p in paths)
     text = (tmp_path / "out" / "report.md").read_text()
     assert "Kendall tau" in text and "## Verdict" in text

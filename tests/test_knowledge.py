@@ -30,6 +30,30 @@ def test_doe_pairs_every_case_per_unit(doe_table):
     assert set(INDICATOR_NAMES) <= set(doe_table.columns)
 
 
+def test_doe_missions_and_pairs_extend_the_one_mission_design(doe_table):
+    """Several missions per unit (column replicate) and pairs of modes flown together; mission 0 of a unit is
+    the one-mission design's flight, byte for byte."""
+    base = DesignOfExperiments(n_units=2, intensities=(0.5, 1.0), mission=MissionProfile(duration_s=120.0),
+                               modes=("null_bias_drift", "internal_leakage"))
+    one = run_doe(base)
+    import dataclasses
+
+    more = run_doe(dataclasses.replace(base, missions=2, pairs=(("null_bias_drift", "internal_leakage"),),
+                                       pair_intensities=(1.0,)))
+    assert len(more) == 2 * 2 * (1 + 2 * 2 + 1) and sorted(set(more["replicate"])) == [0, 1]
+    pair = more[more["mode"] == "null_bias_drift+internal_leakage"]
+    assert len(pair) == 4 and (pair["intensity"] == 1.0).all() and (pair["intensity_2"] == 1.0).all()
+    first = more[(more["replicate"] == 0) & ~more["mode"].str.contains("+", regex=False)]
+    cols = [c for c in one.columns if c != "flight_id"]
+    pd.testing.assert_frame_equal(first[cols].reset_index(drop=True), one[cols].reset_index(drop=True))
+    # another mission is another flight profile: the healthy indicators differ
+    healthy = more[more["mode"] == "healthy"].set_index(["unit_id", "replicate"])
+    assert not np.allclose(healthy.loc[(0, 0), list(INDICATOR_NAMES)].to_numpy(float),
+                           healthy.loc[(0, 1), list(INDICATOR_NAMES)].to_numpy(float))
+    with pytest.raises(Exception, match="pair_intensities"):
+        DesignOfExperiments(pairs=(("backlash", "internal_leakage"),))
+
+
 def test_null_bias_drift_signature_pattern(doe_table):
     """docs/physics.md §6 Degradation modes: null-bias drift moves X1, X2, Inb, I0 together by ~ +1.6 mA at f = 1."""
     from fuelhm_bench.diagnosis.itl import fit_itl

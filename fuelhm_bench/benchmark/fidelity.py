@@ -21,6 +21,7 @@ harness here.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -79,6 +80,12 @@ class FidelityReport:
         The targets checked (:data:`TARGETS`).
     seconds : dict
         Wall time per fidelity [s] (data preparation and the panel).
+    labels : tuple of str, default=("physics", "surrogate")
+        The two runs compared (the column suffixes): the reference first.
+    noise_floor : FidelityReport or None, default=None
+        The same panel at physics fidelity under the reference seed and another
+        master seed (:func:`fidelity_check` with ``noise_seed``): how far apart two
+        physics runs are, the scale against which the targets are to be read.
     """
 
     scenario: str
@@ -88,25 +95,28 @@ class FidelityReport:
     kendall_p: float
     targets: dict = field(default_factory=lambda: dict(TARGETS))
     seconds: dict = field(default_factory=dict)
+    labels: tuple = FIDELITIES
+    noise_floor: FidelityReport | None = None
 
     @property
     def failures(self) -> list[str]:
         """Every target not met, in words (empty when all are met)."""
         t = self.targets
+        a, b = self.labels
         out = []
         if not (self.kendall_tau >= t["kendall_tau"]):
             out.append(f"Kendall tau {self.kendall_tau:.2f} < {t['kendall_tau']:g}")
         for _, row in self.methods.iterrows():
-            if row["status_physics"] != "ok" or row["status_surrogate"] != "ok":
-                out.append(f"{row['method']} did not run at both fidelities ({row['status_physics']}/"
-                           f"{row['status_surrogate']})")
+            if row[f"status_{a}"] != "ok" or row[f"status_{b}"] != "ok":
+                out.append(f"{row['method']} did not run in both runs ({row[f'status_{a}']}/"
+                           f"{row[f'status_{b}']})")
             elif abs(row["summary_diff"]) > t["summary_points"]:
-                out.append(f"{row['method']} summary {row['summary_surrogate']:.1f} (surrogate) vs "
-                           f"{row['summary_physics']:.1f} (physics)")
+                out.append(f"{row['method']} summary {row[f'summary_{b}']:.1f} ({b}) vs "
+                           f"{row[f'summary_{a}']:.1f} ({a})")
         for _, row in self.modes.iterrows():
             if np.isfinite(row["fcr_diff"]) and abs(row["fcr_diff"]) > t["fcr"]:
-                out.append(f"{row['method']} FCR on {row['mode']} {row['fcr_surrogate']:.2f} (surrogate) vs "
-                           f"{row['fcr_physics']:.2f} (physics)")
+                out.append(f"{row['method']} FCR on {row['mode']} {row[f'fcr_{b}']:.2f} ({b}) vs "
+                           f"{row[f'fcr_{a}']:.2f} ({a})")
         return out
 
     @property
@@ -115,22 +125,30 @@ class FidelityReport:
         return not self.failures
 
     def summary(self) -> pd.Series:
-        """One line of the fidelity table: tau, worst differences, verdict."""
-        ok = self.methods[(self.methods["status_physics"] == "ok") & (self.methods["status_surrogate"] == "ok")]
+        """One line of the fidelity table: tau, worst differences, verdict (and the noise floor's, when measured)."""
+        a, b = self.labels
+        ok = self.methods[(self.methods[f"status_{a}"] == "ok") & (self.methods[f"status_{b}"] == "ok")]
         fcr = self.modes["fcr_diff"].abs()
         det = self.modes["detection_diff"].abs()
         worst = ok.loc[ok["summary_diff"].abs().idxmax()] if len(ok) else None
+        noise = {}
+        if self.noise_floor is not None:
+            n = self.noise_floor.summary()
+            noise = {"noise_tau": n["kendall_tau"], "noise_max_summary_diff": n["max_summary_diff"],
+                     "noise_max_fcr_diff": n["max_fcr_diff"]}
         return pd.Series({
             "scenario": self.scenario, "methods": int(len(ok)), "kendall_tau": round(self.kendall_tau, 3),
             "max_summary_diff": round(float(ok["summary_diff"].abs().max()), 1) if len(ok) else np.nan,
             "worst_method": "" if worst is None else worst["method"],
             "max_fcr_diff": round(float(fcr.max()), 3) if fcr.notna().any() else np.nan,
             "max_detection_diff": round(float(det.max()), 3) if det.notna().any() else np.nan,
-            "verdict": "pass" if self.passed else f"FAIL ({len(self.failures)})"})
+            "verdict": "pass" if self.passed else f"FAIL ({len(self.failures)})", **noise})
 
     def to_markdown(self) -> str:
         """The report as Markdown (summary line, per-method table, per-mode table, failures)."""
-        lines = [f"# Fidelity check: {self.scenario}", "",
+        a, b = self.labels
+        title = "Fidelity check" if self.labels == FIDELITIES else f"Comparison {b} vs {a}"
+        lines = [f"# {title}: {self.scenario}", "",
                  f"Kendall tau (summary scores, {len(self.methods)} methods): {self.kendall_tau:.3f} "
                  f"(p = {self.kendall_p:.3g}); targets: tau >= {self.targets['kendall_tau']:g}, "
                  f"|summary diff| <= {self.targets['summary_points']:g} points, |FCR diff| <= "
@@ -138,6 +156,13 @@ class FidelityReport:
                  _markdown(self.methods.round(2)), "", "## Per mode (detection at the method's alarm, FCR)", "",
                  _markdown(self.modes.round(3)), "", "## Verdict", ""]
         lines += [f"- {f}" for f in self.failures] or ["All targets met."]
+        if self.noise_floor is not None:
+            n = self.noise_floor
+            lines += ["", f"## Noise floor: physics vs physics ({n.labels[1]})", "",
+                      "The same panel at physics fidelity under two master seeds: differences this large arise "
+                      "between two physics runs, with no surrogate involved.", "",
+                      _markdown(pd.DataFrame([n.summary()]).drop(columns=["scenario"])), "",
+                      _markdown(n.methods.round(2))]
         return "\n".join(lines) + "\n"
 
     def write(self, out: Path) -> list[Path]:
@@ -149,6 +174,8 @@ class FidelityReport:
         self.modes.to_csv(paths[1], index=False)
         paths[2].write_text(self.to_markdown(), encoding="utf-8")
         plot_fidelity(self, paths[3])
+        if self.noise_floor is not None:
+            paths += self.noise_floor.write(out / "noise_floor")
         return paths
 
 
@@ -174,7 +201,7 @@ def _per_mode(scorecard) -> pd.DataFrame:
 
 
 def compare_outcomes(scenario: str, outcomes: dict[str, dict], *, targets: dict | None = None,
-                     seconds: dict | None = None) -> FidelityReport:
+                     seconds: dict | None = None, labels: tuple = FIDELITIES) -> FidelityReport:
     """Compare the outcomes of a panel at the two fidelities (pure: outcomes in, report out).
 
     Parameters
@@ -187,6 +214,8 @@ def compare_outcomes(scenario: str, outcomes: dict[str, dict], *, targets: dict 
     targets : dict or None, default=None
         Overrides of :data:`TARGETS`.
     seconds : dict or None, default=None
+    labels : tuple of two str, default=("physics", "surrogate")
+        The keys of ``outcomes`` (reference first); the column suffixes of the report.
 
     Returns
     -------
@@ -194,41 +223,44 @@ def compare_outcomes(scenario: str, outcomes: dict[str, dict], *, targets: dict 
     """
     from scipy.stats import kendalltau
 
-    names = list(dict.fromkeys([*outcomes["physics"], *outcomes["surrogate"]]))
+    labels = tuple(labels)
+    ref, other = labels
+    names = list(dict.fromkeys([*outcomes[ref], *outcomes[other]]))
     rows, mode_rows = [], []
     for name in names:
         row = {"method": name}
         cards = {}
-        for fid in FIDELITIES:
+        for fid in labels:
             out = outcomes[fid].get(name)
             row[f"status_{fid}"] = "missing" if out is None else out.status
             cards[fid] = out.score() if out is not None and out.ok else None
             row[f"summary_{fid}"] = float(cards[fid].summary_score) if cards[fid] is not None else np.nan
-        row["summary_diff"] = row["summary_surrogate"] - row["summary_physics"]
-        messages = [getattr(outcomes[f].get(name), "message", "") or "" for f in FIDELITIES]
+        row["summary_diff"] = row[f"summary_{other}"] - row[f"summary_{ref}"]
+        messages = [getattr(outcomes[f].get(name), "message", "") or "" for f in labels]
         row["message"] = next((m.strip().splitlines()[-1] for m in messages if m.strip()), "")
         rows.append(row)
         if all(c is not None for c in cards.values()):
             pm = {fid: _per_mode(c) for fid, c in cards.items()}
-            for mode in pm["physics"].index.union(pm["surrogate"].index):
+            for mode in pm[ref].index.union(pm[other].index):
                 r = {"method": name, "mode": mode}
                 for what in ("detection", "fcr"):
-                    for fid in FIDELITIES:
+                    for fid in labels:
                         r[f"{what}_{fid}"] = float(pm[fid][what].get(mode, np.nan))
-                    r[f"{what}_diff"] = r[f"{what}_surrogate"] - r[f"{what}_physics"]
+                    r[f"{what}_diff"] = r[f"{what}_{other}"] - r[f"{what}_{ref}"]
                 mode_rows.append(r)
     methods = pd.DataFrame(rows)
-    ok = methods["summary_physics"].notna() & methods["summary_surrogate"].notna()
-    for fid in FIDELITIES:
+    ok = methods[f"summary_{ref}"].notna() & methods[f"summary_{other}"].notna()
+    for fid in labels:
         methods[f"rank_{fid}"] = methods[f"summary_{fid}"].rank(ascending=False, method="min")
     if ok.sum() >= 2:
-        res = kendalltau(methods.loc[ok, "summary_physics"], methods.loc[ok, "summary_surrogate"])
+        res = kendalltau(methods.loc[ok, f"summary_{ref}"], methods.loc[ok, f"summary_{other}"])
         tau, p = float(res.statistic), float(res.pvalue)
     else:
         tau, p = float("nan"), float("nan")
-    columns = ["method", "mode"] + [f"{w}_{s}" for w in ("detection", "fcr") for s in (*FIDELITIES, "diff")]
+    columns = ["method", "mode"] + [f"{w}_{s}" for w in ("detection", "fcr") for s in (*labels, "diff")]
     modes = pd.DataFrame(mode_rows, columns=columns)
-    return FidelityReport(scenario, methods, modes, tau, p, {**TARGETS, **(targets or {})}, dict(seconds or {}))
+    return FidelityReport(scenario, methods, modes, tau, p, {**TARGETS, **(targets or {})}, dict(seconds or {}),
+                          labels)
 
 
 def _run_panel(methods: dict, scenario, fidelity: str, *, seed, scale, flight_minutes, knowledge_size,
@@ -249,7 +281,7 @@ def _run_panel(methods: dict, scenario, fidelity: str, *, seed, scale, flight_mi
 
 def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = None, scale: float = 1.0,
                    flight_minutes: float | None = None, knowledge_size=None, cache_dir=None,
-                   random_state: int = 0, timeout_s: float = 600.0,
+                   random_state: int = 0, timeout_s: float = 600.0, noise_seed: int | None = None,
                    progress: Callable[[str], object] | None = None) -> FidelityReport:
     """Evaluate a panel of methods at both fidelities and compare their results.
 
@@ -266,6 +298,11 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
         Passed to every ``fit``.
     timeout_s : float, default=600.0
         Time limit of each method run [s].
+    noise_seed : int or None, default=None
+        Also run the panel at physics fidelity with this master seed (new training,
+        knowledge and scored fleets) and compare it with the physics run
+        (:attr:`FidelityReport.noise_floor`): the differences between two physics
+        runs that no surrogate can be expected to beat. None: not measured.
     progress : callable, optional
         Called with a line of text before each run.
 
@@ -285,6 +322,14 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
     if not isinstance(methods, dict) or len(methods) < 2:
         raise ParameterError(f"The 'methods' parameter of fidelity_check must be a dict of at least two named "
                              f"methods (a ranking needs two). Got {methods!r:.100} instead.")
+    if noise_seed is not None:  # checked before any run
+        if isinstance(noise_seed, bool) or not isinstance(noise_seed, (int, np.integer)) or noise_seed < 0:
+            raise ParameterError(f"The 'noise_seed' parameter of fidelity_check must be an int >= 0 or None. "
+                                 f"Got {noise_seed!r} instead.")
+        reference = sc.seeds.master if seed is None else seed
+        if int(noise_seed) == int(reference):
+            raise ParameterError(f"The 'noise_seed' parameter of fidelity_check must differ from the master seed "
+                                 f"of the run ({reference}); two runs with one seed are the same run.")
     outcomes, seconds = {}, {}
     for fid in FIDELITIES:
         t0 = time.perf_counter()
@@ -292,7 +337,17 @@ def fidelity_check(scenario, *, methods: dict | None = None, seed: int | None = 
                                    knowledge_size=knowledge_size, cache_dir=cache_dir,
                                    random_state=random_state, timeout_s=timeout_s, progress=progress)
         seconds[fid] = round(time.perf_counter() - t0, 1)
-    return compare_outcomes(sc.id, outcomes, seconds=seconds)
+    report = compare_outcomes(sc.id, outcomes, seconds=seconds)
+    if noise_seed is None:
+        return report
+    label = f"physics_seed{int(noise_seed)}"
+    t0 = time.perf_counter()
+    other = _run_panel(methods, sc, "physics", seed=int(noise_seed), scale=scale, flight_minutes=flight_minutes,
+                       knowledge_size=knowledge_size, cache_dir=cache_dir, random_state=random_state,
+                       timeout_s=timeout_s, progress=progress)
+    noise = compare_outcomes(sc.id, {"physics": outcomes["physics"], label: other}, labels=("physics", label),
+                             seconds={"physics": seconds["physics"], label: round(time.perf_counter() - t0, 1)})
+    return dataclasses.replace(report, noise_floor=noise)
 
 
 def _scored_fleet(env, units: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -371,19 +426,20 @@ def plot_fidelity(report: FidelityReport, path) -> Path:
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
     m = report.methods
-    lo = float(np.nanmin([m["summary_physics"].min(), m["summary_surrogate"].min(), 0.0])) - 5
-    hi = float(np.nanmax([m["summary_physics"].max(), m["summary_surrogate"].max(), 100.0])) + 5
+    a, b = report.labels
+    lo = float(np.nanmin([m[f"summary_{a}"].min(), m[f"summary_{b}"].min(), 0.0])) - 5
+    hi = float(np.nanmax([m[f"summary_{a}"].max(), m[f"summary_{b}"].max(), 100.0])) + 5
     band = report.targets["summary_points"]
     ax1.fill_between([lo, hi], [lo - band, hi - band], [lo + band, hi + band], color="0.9",
                      label=f"within {band:g} points")
     ax1.plot([lo, hi], [lo, hi], color="0.5", lw=1)
-    ax1.scatter(m["summary_physics"], m["summary_surrogate"], zorder=3)
+    ax1.scatter(m[f"summary_{a}"], m[f"summary_{b}"], zorder=3)
     for _, r in m.iterrows():
-        if np.isfinite(r["summary_physics"]) and np.isfinite(r["summary_surrogate"]):
-            ax1.annotate(r["method"], (r["summary_physics"], r["summary_surrogate"]), fontsize=7,
+        if np.isfinite(r[f"summary_{a}"]) and np.isfinite(r[f"summary_{b}"]):
+            ax1.annotate(r["method"], (r[f"summary_{a}"], r[f"summary_{b}"]), fontsize=7,
                          xytext=(3, 3), textcoords="offset points")
-    ax1.set_xlabel("summary score, physics")
-    ax1.set_ylabel("summary score, surrogate")
+    ax1.set_xlabel(f"summary score, {a}")
+    ax1.set_ylabel(f"summary score, {b}")
     ax1.set_title(f"{report.scenario}: Kendall tau = {report.kendall_tau:.2f}")
     ax1.legend(loc="upper left", fontsize=8)
     modes = report.modes.dropna(subset=["fcr_diff"])
@@ -394,7 +450,7 @@ def plot_fidelity(report: FidelityReport, path) -> Path:
     t = report.targets["fcr"]
     ax2.axhspan(-t, t, color="0.9", zorder=0)
     ax2.axhline(0, color="0.5", lw=1)
-    ax2.set_ylabel("FCR, surrogate - physics")
+    ax2.set_ylabel(f"FCR, {b} - {a}")
     ax2.set_title("false classification rate per mode")
     ax2.tick_params(axis="x", labelrotation=30, labelsize=7)
     fig.tight_layout()

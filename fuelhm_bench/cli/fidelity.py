@@ -23,6 +23,9 @@ def register(sub) -> None:
     p.add_argument("--method", action="append", default=None, metavar="MODULE:CLASS",
                    help="method of the panel (repeatable, at least two); default: the reference panel")
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenarios' master seed")
+    p.add_argument("--noise-seed", type=non_negative_int, default=None,
+                   help="also run the panel at physics fidelity with this master seed and report how far apart "
+                        "the two physics runs are (the noise floor of the comparison; costs a second physics run)")
     p.add_argument("--method-seed", type=non_negative_int, default=0, help="random_state passed to fit")
     p.add_argument("--timeout", type=positive_float, default=600.0, help="time limit per method run [s]")
     p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of scored units")
@@ -58,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     for scenario in dict.fromkeys(scenarios):
         report = fidelity_check(scenario, methods=methods, seed=args.seed, scale=args.scale,
                                 flight_minutes=args.minutes, cache_dir=args.cache_dir,
-                                random_state=args.method_seed, timeout_s=args.timeout,
+                                random_state=args.method_seed, timeout_s=args.timeout, noise_seed=args.noise_seed,
                                 progress=lambda line: print(line, file=sys.stderr, flush=True))
         report.write(out / report.scenario)
         rows.append(report.summary())

@@ -103,6 +103,13 @@ class KnowledgeSize:
         are learnt on (the scored fleet's model, the scenario's modes only), >= 1.
     surrogate_doe_intensities : tuple of float, default=(0.1, 0.25, 0.5, 0.75, 1.0)
         Its intensities, each in (0, 1].
+    surrogate_doe_missions : int, default=3
+        Missions (flight profile and noise) each surrogate DOE unit flies every case
+        on, >= 1: the flight-to-flight variation of a unit's response.
+    surrogate_doe_pair_intensities : tuple of float, default=(0.5, 1.0)
+        For a scenario whose modes occur together (``simultaneous``), the surrogate
+        DOE also flies every pair of its modes at every combination of these
+        intensities, each in (0, 1]: the interaction of simultaneous modes.
     doe_modes : tuple of str, default=MODE_IDS
         Modes of the published design of experiments (the ITL and signatures
         have these modes only). A study of some modes (the paper's two) need
@@ -124,17 +131,19 @@ class KnowledgeSize:
     surrogate_doe_units: int = 24
     surrogate_doe_intensities: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75, 1.0)
     doe_modes: tuple[str, ...] = MODE_IDS
+    surrogate_doe_missions: int = 3
+    surrogate_doe_pair_intensities: tuple[float, ...] = (0.5, 1.0)
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ParameterError:
             return parameter_error(name, "KnowledgeSize", allowed, getattr(self, name))
 
         for name in ("doe_units", "healthy_units", "healthy_flights", "surrogate_units", "surrogate_flights",
-                     "surrogate_doe_units"):
+                     "surrogate_doe_units", "surrogate_doe_missions"):
             value = getattr(self, name)
             if not (isinstance(value, int) and not isinstance(value, bool)) or value < 1:
                 raise bad(name, "an int >= 1")
-        for name in ("doe_intensities", "surrogate_doe_intensities"):
+        for name in ("doe_intensities", "surrogate_doe_intensities", "surrogate_doe_pair_intensities"):
             try:
                 intensities = tuple(float(f) for f in getattr(self, name))
             except (TypeError, ValueError):
@@ -151,10 +160,11 @@ class KnowledgeSize:
     @classmethod
     def small(cls) -> KnowledgeSize:
         """A quick build for tests: 1 DOE unit at 2 intensities, 4 x 4 published and 6 x 5 surrogate healthy
-        flights, a surrogate DOE of 2 units at 2 intensities."""
+        flights, a surrogate DOE of 2 units at 2 intensities on 2 missions (pairs at 1.0)."""
         return cls(doe_units=1, doe_intensities=(0.5, 1.0), healthy_units=4, healthy_flights=4,
                    surrogate_units=6, surrogate_flights=5, surrogate_doe_units=2,
-                   surrogate_doe_intensities=(0.5, 1.0))
+                   surrogate_doe_intensities=(0.5, 1.0), surrogate_doe_missions=2,
+                   surrogate_doe_pair_intensities=(1.0,))
 
     @classmethod
     def coerce(cls, value: object, owner: str) -> KnowledgeSize:
@@ -507,6 +517,10 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     modes the scenario schedules (all seven when it schedules none of them).
     Each unit's manufacturing coordinates are in its ``unit_z:<parameter>``
     columns (:func:`fuelhm_bench.physics.model.dispersion_coordinates`).
+    Every unit flies its cases on ``size.surrogate_doe_missions`` missions
+    (column ``replicate``), and, when the scenario's modes occur together
+    (``simultaneous``), every pair of its modes at
+    ``size.surrogate_doe_pair_intensities`` (:class:`~fuelhm_bench.datasets.doe.DesignOfExperiments`).
 
     Returns
     -------
@@ -522,7 +536,8 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     size = KnowledgeSize() if size is None else size
     doe = _surrogate_design(sc, flight_minutes, size, drifted)
     params = {"units": size.surrogate_doe_units, "intensities": list(size.surrogate_doe_intensities),
-              "drifted": bool(drifted) and bool(sc.drift), "modes": list(doe.modes)}
+              "drifted": bool(drifted) and bool(sc.drift), "modes": list(doe.modes), "missions": doe.missions,
+              "pairs": [list(pr) for pr in doe.pairs], "pair_intensities": list(doe.pair_intensities)}
     key = cache_key("surrogate-doe", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
@@ -544,9 +559,12 @@ def _surrogate_design(sc, flight_minutes, size, drifted):
     nominal = sc.drifted_model() if drifted else sc.truth_model()
     scheduled = {s.mode for s in sc.mode_schedules()}
     modes = tuple(m for m in MODE_IDS if m in scheduled) or tuple(MODE_IDS)
+    pairs = (tuple((a, b) for i, a in enumerate(modes) for b in modes[i + 1:])
+             if config.simultaneous and len(scheduled) > 1 else ())
     return DesignOfExperiments(n_units=size.surrogate_doe_units, intensities=size.surrogate_doe_intensities,
                                modes=modes, mission=config.mission, nominal=nominal, dispersion=config.dispersion,
-                               seed=config.seed + 1)
+                               seed=config.seed + 1, missions=size.surrogate_doe_missions, pairs=pairs,
+                               pair_intensities=size.surrogate_doe_pair_intensities if pairs else ())
 
 
 def _with_coordinates(table: pd.DataFrame, models: list, nominal, dispersion) -> pd.DataFrame:

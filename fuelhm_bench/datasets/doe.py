@@ -7,6 +7,14 @@ unit's dispersion, the operating conditions and the sensor noise cancel in
 ``dI = I(unit, mode, intensity) - I(unit, healthy)``, which is what
 :func:`~fuelhm_bench.diagnosis.itl.fit_itl` regresses on the intensity.
 
+Two extensions serve the surrogate fidelity (:mod:`fuelhm_bench.envs.surrogate`):
+``missions > 1`` flies every case of a unit under several flight profiles and
+noise realisations (column ``replicate``), so that the flight-to-flight variation
+of a unit's response is observed; ``pairs`` adds flights with two modes at once
+(``mode`` ``"a+b"``, intensities in ``intensity`` and ``intensity_2``), so that
+the interaction of simultaneous modes is observed. With the defaults (one
+mission, no pair) the table is that of the published DOE, unchanged.
+
 The ITL is *published knowledge*: it is computed on the nominal model the
 benchmark publishes (no hidden effects), with the scenario's mission and sensor.
 """
@@ -50,6 +58,13 @@ class DesignOfExperiments:
         Manufacturing dispersion of the units.
     seed : int, default=0
         Master seed.
+    missions : int, default=1
+        Flight profiles (with their noise realisations) each unit flies every case
+        on, >= 1; mission 0 is the one of a one-mission design.
+    pairs : tuple of (str, str), default=()
+        Pairs of modes flown together, each at every combination of ``pair_intensities``.
+    pair_intensities : tuple of float, default=()
+        Intensities of each mode of a pair, in (0, 1] (required when ``pairs`` is given).
     """
 
     n_units: int = 8
@@ -59,6 +74,9 @@ class DesignOfExperiments:
     nominal: LoopModel = field(default_factory=LoopModel)
     dispersion: Dispersion = field(default_factory=Dispersion)
     seed: int = 0
+    missions: int = 1
+    pairs: tuple = ()
+    pair_intensities: tuple = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.n_units, int) or self.n_units < 1:
@@ -67,15 +85,32 @@ class DesignOfExperiments:
             raise range_error("DesignOfExperiments.intensities", "a non-empty tuple of values in (0, 1]",
                               self.intensities)
         validate_intensities({m: 0.0 for m in self.modes}, where="DesignOfExperiments.modes")
+        if isinstance(self.missions, bool) or not isinstance(self.missions, int) or self.missions < 1:
+            raise range_error("DesignOfExperiments.missions", "an integer >= 1", self.missions)
+        pairs = tuple(tuple(map(str, pr)) for pr in self.pairs)
+        if any(len(pr) != 2 or pr[0] == pr[1] for pr in pairs):
+            raise range_error("DesignOfExperiments.pairs", "a tuple of pairs of two different modes", self.pairs)
+        for pr in pairs:
+            validate_intensities({m: 0.0 for m in pr}, where="DesignOfExperiments.pairs")
+        if pairs and (not self.pair_intensities
+                      or any(not 0.0 < float(f) <= 1.0 for f in self.pair_intensities)):
+            raise range_error("DesignOfExperiments.pair_intensities", "a non-empty tuple of values in (0, 1] "
+                              "when pairs are given", self.pair_intensities)
+        object.__setattr__(self, "pairs", pairs)
 
     @property
     def n_flights(self) -> int:
         """Number of simulated flights."""
-        return self.n_units * (1 + len(self.modes) * len(self.intensities))
+        return self.n_units * self.missions * len(self.cases())
 
     def cases(self) -> list[tuple[str, float]]:
-        """``(mode, intensity)`` of every flight of a unit, healthy first."""
-        return [("healthy", 0.0)] + [(m, float(f)) for m in self.modes for f in self.intensities]
+        """``(mode, intensity)`` of every flight of a unit on one mission, healthy first.
+
+        A pair's case is ``("a+b", (f_a, f_b))``.
+        """
+        return ([("healthy", 0.0)] + [(m, float(f)) for m in self.modes for f in self.intensities]
+                + [(f"{a}+{b}", (float(fa), float(fb))) for a, b in self.pairs
+                   for fa in self.pair_intensities for fb in self.pair_intensities])
 
 
 def run_doe(doe: DesignOfExperiments, *, batch_size: int | None = None, extraction=None,
@@ -107,6 +142,8 @@ def run_doe(doe: DesignOfExperiments, *, batch_size: int | None = None, extracti
 
     total = doe.n_flights
     batch_size = min(len(doe.cases()), 29) if batch_size is None else batch_size  # memory bound as in 0.1
+    if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
+        raise range_error("run_doe batch_size", "an integer >= 1 or None", batch_size)
     tasks = [(doe, s, min(s + batch_size, total), extraction) for s in range(0, total, batch_size)]
     parts = run_ordered(_doe_part, tasks, workers=workers, sizes=[t[2] - t[1] for t in tasks], progress=progress)
     return pd.concat(parts, ignore_index=True)
@@ -116,25 +153,37 @@ def _doe_part(doe: DesignOfExperiments, start: int, stop: int, extraction) -> pd
     """Indicators of the flights ``start .. stop - 1`` of the design (one piece of :func:`run_doe`)."""
     from fuelhm_bench.indicators import extract_table
 
-    per_unit = len(doe.cases())
+    cases = doe.cases()
+    per_block = len(cases)  # one unit on one mission
     chunk = []
-    for u in range(start // per_unit, (stop - 1) // per_unit + 1):
+    for block in range(start // per_block, (stop - 1) // per_block + 1):
+        u, r = divmod(block, doe.missions)
+        keys = (u,) if r == 0 else (u, r)  # mission 0: the one-mission design's streams
         unit = manufacture(doe.nominal, rng_for(doe.seed, _STREAM_DOE_UNIT, u), doe.dispersion)
-        inputs = doe.mission.sample(rng_for(doe.seed, _STREAM_DOE_MISSION, u))
-        for c, (mode, f) in enumerate(doe.cases()):
-            flight_id = u * per_unit + c
+        inputs = doe.mission.sample(rng_for(doe.seed, _STREAM_DOE_MISSION, *keys))
+        for c, (mode, f) in enumerate(cases):
+            flight_id = block * per_block + c
             if start <= flight_id < stop:
-                model = unit if mode == "healthy" else unit.degraded({mode: f})
-                chunk.append((flight_id, u, mode, f, model, inputs))
+                if mode == "healthy":
+                    model = unit
+                elif "+" in mode:
+                    model = unit.degraded(dict(zip(mode.split("+"), f)))
+                else:
+                    model = unit.degraded({mode: f})
+                chunk.append((flight_id, u, mode, f, model, inputs, r, keys))
     outs = simulate([j[4] for j in chunk], [j[5] for j in chunk],
-                    [rng_for(doe.seed, _STREAM_DOE_NOISE, j[1]) for j in chunk],
-                    labels=[f"DOE unit {j[1]}, {j[2]} at {j[3]:g}" for j in chunk])
+                    [rng_for(doe.seed, _STREAM_DOE_NOISE, *j[7]) for j in chunk],
+                    labels=[f"DOE unit {j[1]} mission {j[6]}, {j[2]} at {j[3]}" for j in chunk])
     flights = [_Flight(j[0], j[1], o.time_s, o.current_a * 1e3, o.measured_position_m * 1e3,
                        100.0 * j[5].n2_frac)
                for j, o in zip(chunk, outs)]
     table = extract_table(flights, extraction, on_error="flag")
     table.insert(2, "mode", [j[2] for j in chunk])
-    table.insert(3, "intensity", np.array([j[3] for j in chunk]))
+    table.insert(3, "intensity", np.array([j[3][0] if isinstance(j[3], tuple) else j[3] for j in chunk]))
+    if doe.pairs:
+        table.insert(4, "intensity_2", np.array([j[3][1] if isinstance(j[3], tuple) else 0.0 for j in chunk]))
+    if doe.missions > 1:
+        table.insert(2, "replicate", np.array([j[6] for j in chunk], dtype=np.int64))
     return table
 
 

@@ -626,8 +626,7 @@ class ActuationLoopEnv(gym.Env):
         """Surrogate observations of flights ``start ..`` for these intensities (the unit's draws are kept)."""
         parts = self._parts
         if start:
-            parts = {"healthy": parts["healthy"][start:], "valid": parts["valid"][start:],
-                     "doe_units": parts["doe_units"], "uniforms": parts["uniforms"][start:]}
+            parts = self.surrogate.tail(parts, start)
         values, valid = self.surrogate.degrade(parts, intensity)
         tables = {}
         for key, columns, low, high in (("indicators", self._columns, _LOW, _HIGH),

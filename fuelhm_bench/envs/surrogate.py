@@ -29,7 +29,8 @@ The indicators are every column ``c`` of the tables that has a ``c_valid``
 companion (the ten of Table I, and any extended indicator the extractor adds:
 all are learnt and drawn alike). A unit's flights are then drawn as::
 
-    I[flight] = mean + A z + u + r[flight] + sum_m D_m(f_m[flight]; z)
+    I[flight] = mean + A z + u + r[flight] + sum_m [D_m(f_m[flight]; z) + d_m[flight](f_m[flight])]
+                + sum_{a<b} X_ab(f_a[flight], f_b[flight])
 
 1. ``mean + A z``: the unit mean at its coordinates, a ridge regression of the
    physics units' means on ``[1, z]`` (intercept not penalised). Without
@@ -57,9 +58,23 @@ all are learnt and drawn alike). A unit's flights are then drawn as::
    unit-to-unit spread are those of the DOE. A DOE flight
    that made an indicator invalid makes it invalid in the surrogate (between
    two DOE intensities the nearer one's pattern is used with a probability
-   given by the distance). Simultaneous modes add their responses. A mode the
-   DOE did not fly (the cached DOE flies the scenario's modes only) is not
-   learnt: an intensity of it is refused (:attr:`SurrogateModel.learnt`).
+   given by the distance). A mode the DOE did not fly (the cached DOE flies
+   the scenario's modes only) is not learnt: an intensity of it is refused
+   (:attr:`SurrogateModel.learnt`). When the DOE flew each unit on several
+   missions (column ``replicate``), ``D_m`` is regressed on a unit's mean
+   response over its missions.
+5. ``d_m[flight]``: the flight-to-flight part of a response. Each DOE unit's
+   response on one mission minus its mean over its missions (inflated by
+   ``sqrt(n / (n - 1))``) forms a pool (:attr:`SurrogateModel.response_flight`);
+   every degraded flight draws one row of it per active mode, piecewise linear
+   in the intensity like ``D_m``.
+6. ``X_ab``: the interaction of two simultaneous modes, from DOE flights of the
+   pair (mode ``"a+b"``, intensities ``intensity`` and ``intensity_2``):
+   ``I(a+b) - I(a) - I(b) + I(healthy)`` of a DOE unit on one mission (the
+   single responses interpolated between knots), averaged over missions,
+   kept per DOE unit (the one drawn for ``a``); bilinear between the pair
+   intensities, 0 when either mode is at 0, held beyond the largest. Three or
+   more modes add their pairs' interactions.
 
 Estimation error. Everything is estimated from a finite physics sample, and
 the fitted surrogate says how much (:attr:`SurrogateModel.fit_info`,
@@ -71,13 +86,11 @@ flights repeats each of the ``R`` pooled rows about ``n / R`` times (the
 residuals are combined with fresh unit effects and responses, so whole
 flights are not repeated).
 
-What the surrogate does not reproduce: interactions between simultaneous
-modes (their responses add), flight-to-flight variation of a mode's response
-(the DOE flies one mission per unit, so a unit's response is the same on
-every flight at a given intensity: this is what backlash, whose limit cycle
-depends on the flight, misses most), non-linear dependence of the unit mean or
-of a response on the coordinates, dependence of a response on the flight's
-conditions beyond what the DOE unit drawn carries, correlation between
+What the surrogate does not reproduce: interactions of three or more modes
+beyond their pairs', indicators lost only when two modes act together, the
+link between a flight's healthy residual and its response deviation (drawn
+independently; the physics flies both on one mission), non-linear dependence
+of the unit mean or of a response on the coordinates, correlation between
 consecutive flights of a unit beyond the shared unit effect, and a Gaussian
 shape for the unexplained unit part (its covariance is kept, its shape is not).
 Faults outside the seven modes are not modelled.
@@ -85,6 +98,7 @@ Faults outside the seven modes are not modelled.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -254,20 +268,42 @@ def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...]
     unit_index = [a for a, u in enumerate(labels) if ((units == u) & (mode == "healthy")).any()]
     k, m, q, p = len(unit_index), len(modes), len(knots), len(names)
     z = z_all[unit_index]
-    resp = np.full((k, m, q + 1, p), np.nan)
+    replicate = (doe["replicate"].to_numpy(dtype=np.int64) if "replicate" in doe.columns
+                 else np.zeros(len(doe), dtype=np.int64))
+    reps = np.unique(replicate)
+    # per replicate (a mission of the unit: same profile and noise for all its cases), the paired response
+    per = np.full((k, len(reps), m, q + 1, p), np.nan)
+    per[:, :, :, 0, :] = 0.0
     invalid = np.zeros((k, m, q + 1, p), dtype=bool)
-    resp[:, :, 0, :] = 0.0
+    healthy_rows = {}
     for a, ui in enumerate(unit_index):
         u = labels[ui]
-        h = np.flatnonzero((units == u) & (mode == "healthy"))[0]
-        for b, md in enumerate(modes):
-            for c, f in enumerate(knots):
-                rows = np.flatnonzero((units == u) & (mode == md) & np.isclose(intensity, f))
-                if not len(rows):
-                    continue
-                r = rows[0]
-                resp[a, b, c + 1] = np.where(valid[r] & valid[h], x[r] - x[h], np.nan)
-                invalid[a, b, c + 1] = valid[h] & ~valid[r]
+        first = True
+        for e, rep_id in enumerate(reps):
+            hs = np.flatnonzero((units == u) & (mode == "healthy") & (replicate == rep_id))
+            if not len(hs):
+                continue
+            h = hs[0]
+            healthy_rows[a, e] = h
+            for b, md in enumerate(modes):
+                for c, f in enumerate(knots):
+                    rows = np.flatnonzero((units == u) & (mode == md) & np.isclose(intensity, f)
+                                          & (replicate == rep_id))
+                    if not len(rows):
+                        continue
+                    r = rows[0]
+                    per[a, e, b, c + 1] = np.where(valid[r] & valid[h], x[r] - x[h], np.nan)
+                    if first:  # the invalid patterns: the unit's first mission
+                        invalid[a, b, c + 1] = valid[h] & ~valid[r]
+            first = False
+    n_rep = np.isfinite(per).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        resp = np.where(n_rep > 0, np.nansum(per, axis=1) / n_rep, np.nan)
+        # flight-to-flight part of a unit's response: deviation of each mission from the unit's mean response,
+        # inflated so that its variance is unbiased; 0 where a unit has one valid mission
+        inflate = np.where(n_rep > 1, np.sqrt(n_rep / np.maximum(n_rep - 1, 1)), 0.0)
+        dev = np.nan_to_num((per - resp[:, None]) * inflate[:, None])
+    flight = dev.reshape(k * len(reps), m, q + 1, p) if len(reps) > 1 else np.zeros((1, m, q + 1, p))
     learnt = np.array([bool(np.isin(mode, [md]).any()) for md in modes], dtype=bool)
     # A response that is unknown (invalid flight, missing case) takes the mean of the other DOE units; else 0.
     known = np.isfinite(resp)
@@ -290,7 +326,68 @@ def _responses(doe: pd.DataFrame, names: tuple[str, ...], modes: tuple[str, ...]
         # (no coordinates: dof = 1 and the DOE units' own responses are drawn, as an empirical law)
         inflate = np.sqrt((k - 1) / (k - dof)) if k - dof >= 1.0 else 1.0
         residual[:, b] = ((flat - fitted) * inflate).reshape(k, q + 1, p)
-    return knots, learnt, mean, coef_map, residual, invalid, penalties
+    pairs, pair_knots, interactions = _interactions(doe, x, valid, modes, knots, unit_index, labels, reps,
+                                                    replicate, per, healthy_rows)
+    return knots, learnt, mean, coef_map, residual, invalid, penalties, flight, pairs, pair_knots, interactions
+
+
+def _interactions(doe, x, valid, modes, knots, unit_index, labels, reps, replicate, per, healthy_rows):
+    """Pairs of modes flown together, their intensity grid and per-DOE-unit interactions.
+
+    The interaction of modes ``a`` and ``b`` at ``(f_a, f_b)`` is what the pair's flight
+    adds to the sum of the two single responses (each unit's own, interpolated between
+    knots, same mission): ``I(a + b) - I(a) - I(b) + I(healthy)``, averaged over the
+    unit's missions. Returns ``(pairs, pair_knots, interactions)`` with ``interactions``
+    of shape (k, n_pairs, g + 1, g + 1, p), 0 on the axes (one mode at 0).
+    """
+    k, p = len(unit_index), x.shape[1]
+    mode = doe["mode"].astype(str).to_numpy()
+    is_pair = np.char.find(mode.astype(str), "+") >= 0 if len(mode) else np.zeros(0, dtype=bool)
+    if not is_pair.any() or "intensity_2" not in doe.columns:
+        return (), np.zeros(0), np.zeros((k, 0, 1, 1, p))
+    f1 = pd.to_numeric(doe["intensity"], errors="coerce").to_numpy(dtype=np.float64)
+    f2 = pd.to_numeric(doe["intensity_2"], errors="coerce").to_numpy(dtype=np.float64)
+    units = doe["unit_id"].to_numpy()
+    grid = np.concatenate([[0.0], knots])
+    pairs = tuple(pr for pr in dict.fromkeys(tuple(md.split("+")) for md in mode[is_pair])
+                  if len(pr) == 2 and pr[0] in modes and pr[1] in modes)
+    pair_knots = np.unique(np.concatenate([f1[is_pair], f2[is_pair]]))
+    pair_knots = pair_knots[np.isfinite(pair_knots) & (pair_knots > 0)]
+    g = len(pair_knots)
+    inter = np.full((k, len(pairs), g + 1, g + 1, p), np.nan)
+    inter[:, :, 0, :, :] = 0.0
+    inter[:, :, :, 0, :] = 0.0
+
+    def single(a, e, b, f):  # unit a's own response to mode b at f on mission e (linear between knots)
+        curve = per[a, e, b]
+        i0 = min(max(int(np.searchsorted(grid, f, side="right")) - 1, 0), len(grid) - 2)
+        w = (f - grid[i0]) / (grid[i0 + 1] - grid[i0])
+        return curve[i0] + w * (curve[i0 + 1] - curve[i0])
+
+    for a, ui in enumerate(unit_index):
+        for t, (ma, mb) in enumerate(pairs):
+            ba, bb = modes.index(ma), modes.index(mb)
+            for i, fa in enumerate(pair_knots):
+                for j, fb in enumerate(pair_knots):
+                    vals = []
+                    for e, rep_id in enumerate(reps):
+                        h = healthy_rows.get((a, e))
+                        rows = np.flatnonzero((units == labels[ui]) & (mode == f"{ma}+{mb}") & np.isclose(f1, fa)
+                                              & np.isclose(f2, fb) & (replicate == rep_id))
+                        if h is None or not len(rows) or len(grid) < 2:
+                            continue
+                        r = rows[0]
+                        both = np.where(valid[r] & valid[h], x[r] - x[h], np.nan)
+                        vals.append(both - single(a, e, ba, fa) - single(a, e, bb, fb))
+                    if vals:
+                        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                            warnings.simplefilter("ignore", RuntimeWarning)
+                            inter[a, t, i + 1, j + 1] = np.nanmean(vals, axis=0)
+    known = np.isfinite(inter)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fill = np.where(known, inter, 0.0).sum(axis=0) / known.sum(axis=0)
+    fill = np.where(np.isfinite(fill), fill, 0.0)
+    return pairs, pair_knots, np.where(known, inter, fill[None])
 
 
 @dataclass(frozen=True, eq=False)
@@ -329,6 +426,17 @@ class SurrogateModel:
         Response per unit coordinate.
     learnt : ndarray of shape (m,), bool, or None
         Modes the DOE flew (None: all); an intensity of another mode is refused.
+    response_flight : ndarray of shape (s, m, q + 1, p) or None
+        Pool of flight-to-flight deviations of a response from its unit's mean response
+        (one per DOE unit and mission, from a DOE that flew each unit on several missions);
+        each degraded flight adds one drawn from the pool. None or one row of zeros: none.
+    pairs : tuple of (str, str), default=()
+        Pairs of modes whose interaction the DOE flew.
+    pair_knots : ndarray of shape (g,) or None
+        Intensities of each mode of a pair in that DOE, increasing, > 0.
+    interactions : ndarray of shape (k, len(pairs), g + 1, g + 1, p) or None
+        Per DOE unit, what two modes together add to the sum of their responses, at
+        ``(0, pair_knots...)`` squared (0 on the axes); bilinear between the knots, held beyond.
     fit_info : dict
         Sizes of the physics sample (``healthy_units``, ``healthy_flights``,
         ``residual_rows``, ``doe_units``) and unit-bootstrap standard errors
@@ -349,6 +457,10 @@ class SurrogateModel:
     response_mean: np.ndarray | None = None
     response_map: np.ndarray | None = None
     learnt: np.ndarray | None = None
+    response_flight: np.ndarray | None = None
+    pairs: tuple = ()
+    pair_knots: np.ndarray | None = None
+    interactions: np.ndarray | None = None
     fit_info: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -367,6 +479,20 @@ class SurrogateModel:
             object.__setattr__(self, "response_map", np.zeros((m, q + 1, p, c)))
         if self.learnt is None:
             object.__setattr__(self, "learnt", np.ones(m, dtype=bool))
+        if self.response_flight is None:
+            object.__setattr__(self, "response_flight", np.zeros((1, m, q + 1, p)))
+        pairs = tuple(tuple(map(str, pr)) for pr in self.pairs)
+        bad = [pr for pr in pairs if len(pr) != 2 or pr[0] == pr[1] or not set(pr) <= set(modes)]
+        if bad:
+            raise DataFormatError(f"The 'pairs' parameter of SurrogateModel must hold pairs of two different modes "
+                                  f"of {list(modes)}. Got {bad} instead.")
+        object.__setattr__(self, "pairs", pairs)
+        if self.pair_knots is None:
+            object.__setattr__(self, "pair_knots", np.zeros(0))
+        g = len(np.atleast_1d(self.pair_knots))
+        if self.interactions is None:
+            object.__setattr__(self, "interactions", np.zeros((max(k, 0), len(pairs), g + 1, g + 1, p)))
+        s_rows = np.shape(self.response_flight)[0] if np.ndim(self.response_flight) == 4 else -1
         if self.response_mean is None and k >= 1 and np.shape(self.responses)[1:] == (m, q + 1, p):
             resp = np.asarray(self.responses, dtype=np.float64)
             object.__setattr__(self, "response_mean", resp.mean(axis=0))
@@ -374,7 +500,8 @@ class SurrogateModel:
         shapes = {"mean": (p,), "unit_factor": (p, p), "residuals": (r, p), "residual_valid": (r, p),
                   "knots": (q,), "responses": (k, m, q + 1, p), "response_invalid": (k, m, q + 1, p),
                   "coordinate_map": (p, c), "response_mean": (m, q + 1, p), "response_map": (m, q + 1, p, c),
-                  "learnt": (m,)}
+                  "learnt": (m,), "response_flight": (s_rows, m, q + 1, p), "pair_knots": (g,),
+                  "interactions": (k, len(pairs), g + 1, g + 1, p)}
         for name, shape in shapes.items():
             dtype = bool if name in ("residual_valid", "response_invalid", "learnt") else np.float64
             value = getattr(self, name)
@@ -390,10 +517,15 @@ class SurrogateModel:
         if q and not (np.all(np.diff(self.knots) > 0) and self.knots[0] > 0):
             raise DataFormatError(f"The 'knots' parameter of SurrogateModel must be increasing and > 0. "
                                   f"Got {self.knots.tolist()} instead.")
+        if g and not (np.all(np.diff(self.pair_knots) > 0) and self.pair_knots[0] > 0):
+            raise DataFormatError(f"The 'pair_knots' parameter of SurrogateModel must be increasing and > 0. "
+                                  f"Got {self.pair_knots.tolist()} instead.")
         grid = np.concatenate([[0.0], self.knots])
         # derived once for the draws (never part of the parameters): knot spacing, modes that lose indicators
         object.__setattr__(self, "_grid", grid)
         object.__setattr__(self, "_lossy", self.response_invalid.any(axis=(2, 3)))
+        object.__setattr__(self, "_flight_pool", bool(np.any(self.response_flight)))
+        object.__setattr__(self, "_pair_index", tuple((modes.index(a), modes.index(b)) for a, b in pairs))
 
     @classmethod
     def from_knowledge(cls, knowledge) -> SurrogateModel:
@@ -464,9 +596,12 @@ class SurrogateModel:
 
         Calls of ``rng``: ``standard_normal(p)`` (the unexplained unit effect),
         ``random(n_flights * (1 + len(modes)) + len(modes))`` (residual rows, DOE
-        units, invalid-pattern uniforms) and, only when ``coordinates`` is None,
+        units, invalid-pattern uniforms), only when ``coordinates`` is None,
         ``standard_normal(c)`` clipped at 3 (the unit's coordinates, drawn as
-        :func:`~fuelhm_bench.physics.model.manufacture` draws them).
+        :func:`~fuelhm_bench.physics.model.manufacture` draws them), and only
+        when the model has a pool of flight-to-flight response deviations
+        (:attr:`response_flight`), ``random((n_flights, len(modes)))`` (the
+        deviation each flight draws per mode).
 
         Returns
         -------
@@ -474,7 +609,9 @@ class SurrogateModel:
             ``healthy`` (n_flights, p): every column of :attr:`names` (the ten of
             Table I and any extended indicator), invalid ones arbitrary;
             ``valid`` (n_flights, p), bool; ``doe_units`` (m,); ``uniforms``
-            (n_flights, m); ``coordinates`` (c,).
+            (n_flights, m); ``coordinates`` (c,); ``deviations`` (n_flights, m),
+            rows of :attr:`response_flight`. The per-flight entries are those
+            :meth:`tail` slices.
         """
         m, c = len(self.modes), len(self.coordinates)
         z = rng.standard_normal(len(self.names))
@@ -489,8 +626,18 @@ class SurrogateModel:
         doe_units = (u[n_flights:n_flights + m] * self.responses.shape[0]).astype(np.intp)
         uniforms = u[n_flights + m:].reshape(n_flights, m)
         healthy = (self.mean + self.coordinate_map @ coordinates + self.unit_factor @ z) + self.residuals[rows]
+        if self._flight_pool:
+            deviations = (rng.random((n_flights, m)) * self.response_flight.shape[0]).astype(np.intp)
+        else:
+            deviations = np.zeros((n_flights, m), dtype=np.intp)
         return {"healthy": healthy, "valid": self.residual_valid[rows], "doe_units": doe_units,
-                "uniforms": uniforms, "coordinates": coordinates}
+                "uniforms": uniforms, "coordinates": coordinates, "deviations": deviations}
+
+    _PER_FLIGHT = ("healthy", "valid", "uniforms", "deviations")
+
+    def tail(self, parts: dict, start: int) -> dict:
+        """The parts of a unit's flights ``start ..`` (:meth:`draw_parts`; per-unit entries kept)."""
+        return {key: (value[start:] if key in self._PER_FLIGHT else value) for key, value in parts.items()}
 
     def response_curve(self, mode: int, doe_unit: int, coordinates: np.ndarray) -> np.ndarray:
         """Response of a unit to mode ``mode`` at 0 and at each knot, shape (q + 1, p)."""
@@ -543,11 +690,44 @@ class SurrogateModel:
                 np.minimum(i0, last - 1, out=i0)
                 np.maximum(i0, 0, out=i0)
                 out = out + curve[i0] + (f - grid[i0])[:, None] * slopes[i0]
+                if self._flight_pool:  # this flight's deviation from the unit's mean response
+                    pool, pick = self.response_flight[:, j], parts["deviations"][:, j]
+                    lo, hi = pool[pick, i0], pool[pick, i0 + 1]  # (n, p) each
+                    w = ((f - grid[i0]) / (grid[i0 + 1] - grid[i0]))[:, None]
+                    out = out + lo + w * (hi - lo)
                 if lossy[d, j]:
                     w = (f - grid[i0]) / (grid[i0 + 1] - grid[i0])
                     nearest = np.minimum(i0 + (parts["uniforms"][:, j] < w), last)
                     valid = valid & ~self.response_invalid[d, j, nearest]
+            out = self._interact(out, intensities, parts["doe_units"], set(active.tolist()))
         return np.where(valid, out, 0.0), valid
+
+    def _interact(self, out: np.ndarray, intensities: np.ndarray, doe_units: np.ndarray, active: set) -> np.ndarray:
+        """Add the interactions of the pairs of active modes (bilinear on the pair grid, held beyond its last knot)."""
+        if not self._pair_index:
+            return out
+        grid = np.concatenate([[0.0], self.pair_knots])
+        last = len(grid) - 1
+
+        def locate(f):
+            f = np.minimum(f, grid[-1])
+            i0 = np.clip(np.searchsorted(grid, f, side="right") - 1, 0, last - 1)
+            return i0, ((f - grid[i0]) / (grid[i0 + 1] - grid[i0]))[:, None]
+
+        for t, (a, b) in enumerate(self._pair_index):
+            if a not in active or b not in active:
+                continue
+            fa, fb = intensities[:, a], intensities[:, b]
+            both = (fa > 0) & (fb > 0)
+            if not both.any():
+                continue
+            table = self.interactions[doe_units[a], t]  # (g + 1, g + 1, p)
+            ia, wa = locate(fa)
+            ib, wb = locate(fb)
+            value = ((1 - wa) * (1 - wb) * table[ia, ib] + wa * (1 - wb) * table[ia + 1, ib]
+                     + (1 - wa) * wb * table[ia, ib + 1] + wa * wb * table[ia + 1, ib + 1])
+            out = out + np.where(both[:, None], value, 0.0)
+        return out
 
     # ------------------------------------------------------------------ summaries
     @property
@@ -658,12 +838,15 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
     labels, inverse, z = _unit_rows(healthy, coords)
     mean, coef_map, between, resid, rvalid, c, h_pen = _fit_healthy(x, valid, inverse, z, penalty)
     coords = coords[:c]
-    knots, learnt, r_mean, r_map, resp, invalid, r_pen = _responses(doe, names, modes, coords, penalty)
+    (knots, learnt, r_mean, r_map, resp, invalid, r_pen, flight, pairs, pair_knots,
+     interactions) = _responses(doe, names, modes, coords, penalty)
     if resp.shape[0] < 1:
         raise DataFormatError("The 'doe' table of fit_surrogate has no unit with a healthy flight.")
     info = {"healthy_units": int(len(labels)), "healthy_flights": int(len(healthy)),
             "residual_rows": int(len(resid)), "doe_units": int(resp.shape[0]),
             "doe_intensities": knots.tolist(), "coordinates": len(coords), "penalty_healthy": h_pen,
+            "doe_missions": int(flight.shape[0] // max(resp.shape[0], 1)) if np.any(flight) else 1,
+            "doe_pairs": [list(pr) for pr in pairs], "doe_pair_intensities": pair_knots.tolist(),
             "penalty_responses": dict(zip(modes, r_pen))}
     if bootstrap and len(labels) >= 3:
         rng = np.random.default_rng(seed)
@@ -688,4 +871,5 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
     return SurrogateModel(names=names, modes=modes, mean=mean, unit_factor=_factor(between), residuals=resid,
                           residual_valid=rvalid, knots=knots, responses=resp, response_invalid=invalid,
                           coordinates=coords, coordinate_map=coef_map, response_mean=r_mean, response_map=r_map,
-                          learnt=learnt, fit_info=info)
+                          learnt=learnt, response_flight=flight, pairs=pairs, pair_knots=pair_knots,
+                          interactions=interactions, fit_info=info)
