@@ -2,10 +2,14 @@
 
 The isolation model (also in docs/methods.md):
 
-* **Own process, fresh interpreter.** The method runs in a new Python process
-  (``python -m fuelhm_bench.methods._sealed_child``, not a fork), in its own
-  session and process group, with the working directory and ``HOME`` set to an
-  empty scratch directory and a scrubbed environment. Nothing of the caller's
+* **Own process, from a clean zygote.** The method runs in its own Python
+  process, in its own session and process group, with the working directory and
+  ``HOME`` set to an empty scratch directory and a scrubbed environment. The
+  process is forked from this process's zygote (:mod:`fuelhm_bench.methods._zygote`:
+  an interpreter *started* with the same scrubbed environment, which imports the
+  harness's dependencies once and never receives scenario data); without
+  ``fork`` (or with ``FUELHM_BENCH_ZYGOTE=0``) it is a fresh interpreter
+  (``python -m fuelhm_bench.methods._sealed_child``). Nothing of the caller's
   memory (environment, fault schedule, labels) exists in it.
 * **Only what a method may see, over a pipe.** The caller sends the healthy
   training tables, the published knowledge and then one observation row per
