@@ -1,11 +1,10 @@
 """Leaderboard tasks on a Dask cluster: a local one (``--jobs N``) or an existing one (``--scheduler``).
 
-The task graph: one **data build** per (scenario, seed) (it fills the
-simulation cache, and the worker keeps the prepared data in memory), on which
-every **evaluation** of that (scenario, seed) depends
-(:func:`~fuelhm_bench.benchmark.leaderboard.evaluate_task`: it takes the data
-the worker holds, or reads them from the cache, and runs the method sealed on
-the worker). Results
+The task graph: one **data build** per (scenario, seed)
+(:func:`~fuelhm_bench.benchmark.leaderboard.build_data`, which fills the
+simulation cache), on which every **evaluation** of that (scenario, seed)
+depends (:func:`~fuelhm_bench.benchmark.leaderboard.evaluate_task`: it reads the
+built data from the cache and runs the method sealed on the worker). Results
 come back to the client, which alone writes the store as they complete, so an
 interrupted distributed run resumes like a local one.
 
@@ -45,6 +44,8 @@ def run_distributed(todo, kwargs: dict, done, *, jobs: int = 2, scheduler: str |
     """Run ``todo`` tasks on Dask; ``done(record, tables)`` is called in this process as each one completes."""
     from dask.distributed import as_completed
 
+    from fuelhm_bench.benchmark.leaderboard import build_data
+
     client, cluster = _client(jobs, scheduler)
     try:
         builds = {}
@@ -53,7 +54,7 @@ def run_distributed(todo, kwargs: dict, done, *, jobs: int = 2, scheduler: str |
         for t in sorted(todo, key=lambda t: -cost[t.scenario]):  # longest builds first (Dask priority too)
             group = (t.scenario, t.seed, t.fidelity, t.scale)
             if group not in builds:
-                builds[group] = client.submit(_build, t.scenario, t.seed, t.fidelity, t.scale,
+                builds[group] = client.submit(build_data, t.scenario, t.seed, t.fidelity, t.scale,
                                               kwargs["cache_dir"], kwargs["flight_minutes"], pure=False,
                                               key=f"data-{t.scenario_id}-{t.seed}-{t.key[:8]}",
                                               priority=cost[t.scenario])
@@ -90,33 +91,7 @@ def _build_costs(todo) -> dict:
     return costs
 
 
-#: The last data a worker built or loaded, kept for the next evaluation of the same (scenario, seed)
-#: on that worker (one entry: loading it again from the disk cache cost each evaluation about 1 CPU-s).
-_LAST: dict = {}
-
-
-def _prepared(scenario, seed, fidelity, scale, cache_dir, flight_minutes):
-    from fuelhm_bench.benchmark.harness import prepare_evaluation
-
-    key = (str(scenario), seed, fidelity, scale, None if cache_dir is None else str(cache_dir), flight_minutes)
-    evaluation = _LAST.get(key)
-    if evaluation is None:
-        _LAST.clear()
-        evaluation = _LAST[key] = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
-                                                     cache_dir=cache_dir, flight_minutes=flight_minutes)
-    return evaluation
-
-
-def _build(scenario, seed, fidelity, scale, cache_dir, flight_minutes) -> dict:
-    """The data build task: :func:`~fuelhm_bench.benchmark.leaderboard.build_data`, kept on the worker."""
-    from fuelhm_bench.benchmark.leaderboard import data_counts
-
-    return data_counts(_prepared(scenario, seed, fidelity, scale, cache_dir, flight_minutes))
-
-
 def _evaluate_after(_built: dict, task, kwargs: dict):
     from fuelhm_bench.benchmark.leaderboard import evaluate_task
 
-    evaluation = _prepared(task.scenario, task.seed, task.fidelity, task.scale, kwargs["cache_dir"],
-                           kwargs["flight_minutes"])
-    return evaluate_task(task, evaluation=evaluation, **kwargs)
+    return evaluate_task(task, **kwargs)

@@ -193,12 +193,8 @@ def build_data(scenario: str, seed: int, fidelity: str | None, scale: float, cac
     """The data build of one (scenario, seed) (cached on disk); returns its flight counts."""
     from fuelhm_bench.benchmark.harness import prepare_evaluation
 
-    return data_counts(prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale, cache_dir=cache_dir,
-                                          flight_minutes=flight_minutes))
-
-
-def data_counts(ev) -> dict:
-    """Flight counts of a prepared evaluation (what a data build reports)."""
+    ev = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale, cache_dir=cache_dir,
+                            flight_minutes=flight_minutes)
     return {"test": ev.n_flights, "fit": len(ev.fit_indicators), "calibration": len(ev.calibration_indicators),
             "fidelity": ev.fidelity}
 
@@ -400,5 +396,5 @@ def check_shared_params(board: pd.DataFrame, shared: dict) -> None:
         raise ParameterError(f"--param {', '.join(unknown)}: no evaluated method has such a hyperparameter.")
 
 
-__all__ += ["build_data", "check_shared_params", "data_counts", "evaluation_config"]
+__all__ += ["build_data", "check_shared_params", "evaluation_config"]
 del dataclasses
