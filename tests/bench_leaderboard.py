@@ -11,6 +11,13 @@ Targets (issue 10 §6, 2-core machine):
   2 workers measured side by side: efficiency T1 / (2 T2) >= 0.8;
 * ``test_paper_end_to_end``: ``fuelhm-bench paper`` with a cold cache: <= 30 s.
 
+The harness's own overhead (no target; side by side in one run, CPU time):
+
+* ``test_sealed_start``: CPU time of a sealed process from start to a constructed method, forked
+  from the zygote against a fresh interpreter (``FUELHM_BENCH_ZYGOTE=0``), per shipped baseline;
+* ``test_board_with_data_cached``: two scenarios x the default methods at scale 0.3 with their data
+  already simulated (what every evaluation costs beyond the data), with and without the zygote.
+
 Every command runs in a fresh interpreter (start-up and imports included, as a user sees it), with
 its own empty simulation cache (``--cache-dir``) and output folder; numba's compiled functions are
 those of the user cache (compile them once first: ``fuelhm-bench paper --scale 0.1 --out /tmp/x``).
@@ -32,12 +39,12 @@ pytestmark = pytest.mark.benchmark
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def timed(*args: str) -> tuple[float, float]:
+def timed(*args: str, env: dict | None = None) -> tuple[float, float]:
     """Run ``fuelhm-bench ARGS`` in a fresh interpreter; returns (wall s, CPU s of it and its children)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "fuelhm_bench.cli", *args], cwd=ROOT, capture_output=True,
-                          text=True, env={**os.environ, "FUELHM_NO_PROGRESS": "1"})
+                          text=True, env={**os.environ, "FUELHM_NO_PROGRESS": "1", **(env or {})})
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     assert done.returncode == 0, done.stderr[-3000:]
@@ -45,8 +52,9 @@ def timed(*args: str) -> tuple[float, float]:
     return wall, cpu
 
 
-def _leaderboard(config, out, cache, *extra) -> tuple[float, float]:
-    return timed("leaderboard", "--config", str(config), "--out", str(out), "--cache-dir", str(cache), *extra)
+def _leaderboard(config, out, cache, *extra, env: dict | None = None) -> tuple[float, float]:
+    return timed("leaderboard", "--config", str(config), "--out", str(out), "--cache-dir", str(cache), *extra,
+                 env=env)
 
 
 @pytest.fixture(scope="module")
@@ -99,3 +107,54 @@ def test_paper_end_to_end(benchmark, tmp_path):
     print(f"\nfuelhm-bench paper, cold cache: --jobs 2 {cold2[0]:.1f} s wall ({cold2[1]:.1f} s CPU), --jobs 1 "
           f"{cold1[0]:.1f} s wall ({cold1[1]:.1f} s CPU), ratio {cold1[0] / cold2[0]:.2f}; warm cache --jobs 2 "
           f"{warm[0]:.1f} s wall ({warm[1]:.1f} s CPU) (target <= 30 s)")
+
+
+BASELINES = ("fuelhm_baselines.trivial:NullMethod", "fuelhm_baselines.paper_mahalanobis:PaperMahalanobis",
+             "fuelhm_baselines.isolation_forest:IsolationForestMethod",
+             "fuelhm_baselines.itl_classifier:ITLClassifierMethod")
+
+
+def _process_cpu_s(pid: int) -> float:
+    """User + system CPU time of a live process [s] (from /proc: it may be another process's child)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def test_sealed_start(benchmark, monkeypatch):
+    from fuelhm_bench.methods.sandbox import SealedMethod, prestart_zygote
+
+    prestart_zygote()
+
+    def starts() -> dict:
+        out = {}
+        for method in BASELINES:
+            for zygote in (True, False):
+                with SealedMethod(method, zygote=zygote) as m:
+                    out[(method.rsplit(":", 1)[1], zygote)] = _process_cpu_s(m.pid)
+        return out
+
+    starts()  # the zygote's own start-up, once per harness process, is not a start
+    cpu = benchmark.pedantic(starts, rounds=1, iterations=1)
+    for (name, zygote), value in cpu.items():
+        benchmark.extra_info[f"{name}-{'zygote' if zygote else 'interpreter'}"] = value
+    print("\nCPU of a sealed start [s]: " + "; ".join(
+        f"{name}: forked {cpu[(name, True)]:.2f}, fresh interpreter {cpu[(name, False)]:.2f}"
+        for name in dict.fromkeys(n for n, _ in cpu)))
+
+
+def test_board_with_data_cached(benchmark, tmp_path):
+    cfg = tmp_path / "two.yaml"
+    text = (ROOT / "leaderboard" / "methods.yaml").read_text().split("scenarios:")[0]
+    cfg.write_text(text + "scenarios: [paper_2012, robustness_drift]\nscale: 0.3\n")
+    cache = tmp_path / "cache"
+    _leaderboard(cfg, tmp_path / "warm", cache)  # simulates the data once
+
+    def both() -> dict:
+        return {"zygote": _leaderboard(cfg, tmp_path / "z", cache),
+                "interpreter": _leaderboard(cfg, tmp_path / "i", cache, env={"FUELHM_BENCH_ZYGOTE": "0"}),
+                "rerun": _leaderboard(cfg, tmp_path / "z", cache)}
+
+    runs = benchmark.pedantic(both, rounds=1, iterations=1)
+    benchmark.extra_info.update({k: {"wall_s": w, "cpu_s": c} for k, (w, c) in runs.items()})
+    print("\nboard with its data cached (12 evaluations + 6 nominal runs): "
+          + "; ".join(f"{k}: {w:.1f} s wall, {c:.1f} s CPU" for k, (w, c) in runs.items()))

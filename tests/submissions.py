@@ -128,7 +128,7 @@ _GROUND_TRUTH = ("episode_truth", "schedule", "onset_", "intensity_", "Actuation
                  "max_intensity")
 
 
-def _hunt(start_dirs) -> list[str]:
+def _hunt(start_dirs, pids=()) -> list[str]:
     """Everything a submission can reach that smells of ground truth."""
     found = []
     frame = inspect.currentframe()
@@ -161,12 +161,13 @@ def _hunt(start_dirs) -> list[str]:
                             found.append(f"file {dirpath}/{f}")
         except OSError:
             continue
-    try:  # the parent process's memory
-        with open(f"/proc/{os.getppid()}/mem", "rb") as mem:
-            mem.read(1)
-        found.append("parent memory readable")
-    except OSError:
-        pass
+    for pid in {os.getppid(), *pids}:  # the parent process's memory (the zygote's), and the harness's
+        try:
+            with open(f"/proc/{pid}/mem", "rb") as mem:
+                mem.read(1)
+            found.append(f"memory of process {pid} readable")
+        except OSError:
+            pass
     return found
 
 
@@ -177,13 +178,14 @@ class Spy(IdleCurrent):
     harness can see it): a clean run is all-zero guilt with no alarm.
     """
 
-    def __init__(self, *, a=4.0, dirs=()):
+    def __init__(self, *, a=4.0, dirs=(), pids=()):
         self.a = a
         self.dirs = dirs
+        self.pids = pids
 
     def _fit(self, healthy, *, knowledge, raw_flights, rng):
         super()._fit(healthy, knowledge=knowledge, raw_flights=raw_flights, rng=rng)
-        self.found_ = _hunt(self.dirs)
+        self.found_ = _hunt(self.dirs, self.pids)
         print("SPY FOUND:", self.found_, file=sys.stderr, flush=True)
 
     def _decide(self, row):

@@ -34,7 +34,8 @@ def test_a_spy_finds_no_ground_truth(evaluation, cache_dir, tmp_path, monkeypatc
     monkeypatch.setenv("FUELHM_BENCH_CACHE", str(cache_dir))
     log = tmp_path / "spy.log"
     dirs = (str(cache_dir), str(out), os.getcwd(), "/tmp")
-    outcome = run_in_env(Spy(dirs=dirs), evaluation, log_path=log, deny=[str(out)], timeout_s=120)
+    outcome = run_in_env(Spy(dirs=dirs, pids=(os.getpid(),)), evaluation, log_path=log, deny=[str(out)],
+                         timeout_s=120)
     assert outcome.ok, outcome.message
     if outcome.sandbox.startswith("no file-system restriction"):  # no Landlock: memory probes only, then say so
         outcome = run_in_env(Spy(), evaluation, log_path=log, timeout_s=120)

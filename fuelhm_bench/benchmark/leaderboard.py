@@ -24,7 +24,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -291,7 +290,8 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
     rerun : bool, default=False
         Evaluate stored keys again (their rows are replaced).
     jobs : int, default=1
-        1: in this process; > 1: on a local Dask cluster with that many worker processes.
+        1: in this process (data not yet cached simulated on every CPU, methods one at a time);
+        > 1: on a local Dask cluster with that many worker processes.
     scheduler : str, optional
         Address of an existing Dask scheduler (``tcp://host:8786``); overrides ``jobs``.
     method_seed : int, default=0
@@ -335,6 +335,9 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
 
                 run_distributed(todo, kwargs, done, jobs=jobs, scheduler=scheduler)
             else:
+                from fuelhm_bench.methods.sandbox import prestart_zygote
+
+                prestart_zygote()  # a clean interpreter importing its modules while the first data are built
                 _run_local(todo, kwargs, done, progress)
         return write_views(store, out, tasks)
     finally:
@@ -348,7 +351,6 @@ def _run_local(todo: list[Task], kwargs: dict, done, progress) -> None:
     for t in todo:
         groups.setdefault((t.scenario, t.seed, t.fidelity, t.scale), []).append(t)
     for (scenario, seed, fidelity, scale), group in groups.items():
-        t0 = time.perf_counter()
         evaluation = _prepare(prepare_evaluation, scenario, seed, fidelity, scale, kwargs, progress)
         for task in group:
             if progress is not None:
@@ -356,12 +358,14 @@ def _run_local(todo: list[Task], kwargs: dict, done, progress) -> None:
                     done(*evaluate_task(task, evaluation=evaluation, progress=bar.update, **kwargs))
             else:
                 done(*evaluate_task(task, evaluation=evaluation, **kwargs))
-        del t0
 
 
 def _prepare(prepare_evaluation, scenario, seed, fidelity, scale, kwargs, progress):
+    from fuelhm_bench.datasets.parallel import default_workers
+
+    # the data not yet cached are simulated on every CPU (byte-identical for any number of processes)
     common = {"fidelity": fidelity, "seed": seed, "scale": scale, "cache_dir": kwargs["cache_dir"],
-              "flight_minutes": kwargs["flight_minutes"]}
+              "flight_minutes": kwargs["flight_minutes"], "workers": default_workers()}
     if progress is None:
         return prepare_evaluation(scenario, **common)
     with progress(0, f"data of {Path(str(scenario)).stem} (seed {seed})") as bar:

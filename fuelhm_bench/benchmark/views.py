@@ -152,13 +152,13 @@ def _scenario_report(sdir: Path, scenario: str, seed, group: pd.DataFrame) -> No
 
 
 def _method_report(store, out: Path, task) -> None:
-    from fuelhm_bench.scoring import (Run, plot_score_distributions, robustness_table, save_figure, score_run,
-                                      write_tables)
-
     mdir = method_folder(out, task)
     stamp = mdir / "KEY"
     if stamp.is_file() and stamp.read_text().strip() == task.key:
-        return
+        return  # up to date: nothing imported (matplotlib and scipy.stats cost a re-run seconds)
+    from fuelhm_bench.scoring import (Run, plot_score_distributions, robustness_table, save_figure, score_run,
+                                      write_tables)
+
     mdir.mkdir(parents=True, exist_ok=True)
     rec = store.records([task.key]).to_dict("records")[0]
     (mdir / "result.json").write_text(json.dumps(rec, indent=2, default=str))

@@ -24,7 +24,8 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
                    help="write into a non-empty output folder that holds no results store")
     g = p.add_argument_group("parallel and distributed runs (Dask)")
     g.add_argument("--jobs", type=positive_int, default=1,
-                   help="worker processes of a local Dask cluster on the loopback interface (1: in this process)")
+                   help="worker processes of a local Dask cluster on the loopback interface (1: in this process, "
+                        "which simulates the data not yet cached on every CPU)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="address of an existing Dask scheduler (tcp://host:8786); see docs/methods.md")
     g.add_argument("--method-seed", type=non_negative_int, default=0, help="random_state passed to fit")

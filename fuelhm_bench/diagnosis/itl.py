@@ -16,8 +16,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from fuelhm_bench.diagnosis._validation import (
     HEALTHY,
@@ -427,6 +425,9 @@ def plot_itl(itl: ITL, doe_table: pd.DataFrame, out_path) -> Path:
     deltas = paired_deltas(doe_table, features=names)
     slope, r2 = itl.matrix("A"), itl.matrix("r2")
     width, height = 1.9 * len(names) + 1.2, 1.5 * len(modes) + 1.3
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # plotting only: not on a method's import path
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     # Fixed margins (in inches) instead of a layout engine: much faster for 70 panels.

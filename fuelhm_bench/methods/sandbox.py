@@ -2,10 +2,14 @@
 
 The isolation model (also in docs/methods.md):
 
-* **Own process, fresh interpreter.** The method runs in a new Python process
-  (``python -m fuelhm_bench.methods._sealed_child``, not a fork), in its own
-  session and process group, with the working directory and ``HOME`` set to an
-  empty scratch directory and a scrubbed environment. Nothing of the caller's
+* **Own process, from a clean zygote.** The method runs in its own Python
+  process, in its own session and process group, with the working directory and
+  ``HOME`` set to an empty scratch directory and a scrubbed environment. The
+  process is forked from this process's zygote (:mod:`fuelhm_bench.methods._zygote`:
+  an interpreter *started* with the same scrubbed environment, which imports the
+  harness's dependencies once and never receives scenario data); without
+  ``fork`` (or with ``FUELHM_BENCH_ZYGOTE=0``) it is a fresh interpreter
+  (``python -m fuelhm_bench.methods._sealed_child``). Nothing of the caller's
   memory (environment, fault schedule, labels) exists in it.
 * **Only what a method may see, over a pipe.** The caller sends the healthy
   training tables, the published knowledge and then one observation row per
@@ -40,6 +44,7 @@ Every failure is reported as a :class:`SealedFailure` with a ``status``
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import json
 import math
@@ -202,6 +207,21 @@ def _python_roots() -> list[str]:
     return sorted(roots)
 
 
+def _import_path() -> list[str]:
+    """The import path a sealed process gets: this process's working directory and ``sys.path``."""
+    return [os.path.abspath(p) for p in ([os.getcwd()] + sys.path) if p]
+
+
+def _sealed_env(scratch: str, path: list[str]) -> dict:
+    """The scrubbed environment of a sealed process whose scratch directory is ``scratch``."""
+    env = {k: v for k, v in os.environ.items() if k in ("PATH", "LANG", "LC_ALL", "LC_CTYPE", "TZ", "SYSTEMROOT")}
+    env.update({"HOME": scratch, "TMPDIR": scratch, "PYTHONPATH": os.pathsep.join(dict.fromkeys(path)),
+                "PYTHONDONTWRITEBYTECODE": "1", "PYTHONHASHSEED": "0", "MPLBACKEND": "Agg",
+                "MPLCONFIGDIR": scratch, "NUMBA_CACHE_DIR": scratch,
+                "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+    return env
+
+
 class _LogPump(threading.Thread):
     """Copy the child's stdout/stderr to a file, cut at ``limit`` bytes (the rest is drained and dropped)."""
 
@@ -245,6 +265,154 @@ def _raw_payload(flight: Any) -> dict:
     return out
 
 
+class _ForkedProcess:
+    """A sealed process forked by the zygote, seen from the harness as the part of ``Popen`` it uses.
+
+    The zygote is its parent (it reaps it and writes its wait status to ``status_fd``); its
+    stdout/stderr come through ``stdout``; ``pid`` is also its process group.
+    """
+
+    def __init__(self, pid: int, stdout, status_fd: int):
+        self.pid = pid
+        self.stdout = stdout
+        self.returncode: int | None = None
+        self._status_fd = status_fd
+
+    def wait(self, timeout: float | None = None) -> int | None:
+        """The exit code (negative: killed by that signal), as ``Popen.wait``; ``TimeoutExpired`` after ``timeout``."""
+        import select
+
+        if self._status_fd < 0:
+            return self.returncode
+        ready, _, _ = select.select([self._status_fd], [], [], timeout)
+        if not ready:
+            raise subprocess.TimeoutExpired(f"sealed process {self.pid}", timeout)
+        data = os.read(self._status_fd, 64)
+        os.close(self._status_fd)
+        self._status_fd = -1
+        try:
+            self.returncode = os.waitstatus_to_exitcode(int(data))
+        except ValueError:  # the zygote ended first: the process was killed with it
+            self.returncode = -signal.SIGKILL
+        return self.returncode
+
+    def __del__(self):
+        if self._status_fd >= 0:
+            with contextlib.suppress(OSError):
+                os.close(self._status_fd)
+
+
+class _Zygote:
+    """The harness's side of :mod:`fuelhm_bench.methods._zygote` (one per harness process)."""
+
+    def __init__(self, env: dict):
+        self._scratch = tempfile.TemporaryDirectory(prefix="fuelhm-zygote-")
+        mine, theirs = socket.socketpair()
+        env = {**env, "HOME": self._scratch.name, "TMPDIR": self._scratch.name,
+               "MPLCONFIGDIR": self._scratch.name, "NUMBA_CACHE_DIR": self._scratch.name}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "fuelhm_bench.methods._zygote", str(theirs.fileno())],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=self._scratch.name,
+            env=env, pass_fds=(theirs.fileno(),), start_new_session=True, close_fds=True)
+        theirs.close()
+        self.owner = os.getpid()
+        self._sock = mine
+        self._buffer = b""
+        self._ready = False
+        self.lock = threading.Lock()
+
+    def _line(self, timeout: float) -> dict:
+        self._sock.settimeout(timeout)
+        while b"\n" not in self._buffer:
+            chunk = self._sock.recv(65536)
+            if not chunk:
+                raise OSError("the zygote ended")
+            self._buffer += chunk
+        line, _, self._buffer = self._buffer.partition(b"\n")
+        return json.loads(line.decode("utf-8"))
+
+    def alive(self) -> bool:
+        return self.owner == os.getpid() and self.proc.poll() is None
+
+    def spawn(self, scratch: str, env: dict, child_sock: socket.socket) -> _ForkedProcess | None:
+        """Fork a sealed process (None when the zygote cannot: the caller starts an interpreter)."""
+        log_r, log_w = os.pipe()
+        status_r, status_w = os.pipe()
+        try:
+            with self.lock:
+                if not self._ready:
+                    if self._line(_STARTUP_S).get("status") != "ready":
+                        raise OSError("the zygote did not start")
+                    self._ready = True
+                request = json.dumps({"scratch": scratch, "env": env}).encode("utf-8")
+                self._sock.settimeout(_STARTUP_S)
+                socket.send_fds(self._sock, [request], [child_sock.fileno(), log_w, status_w])
+                reply = self._line(_STARTUP_S)
+            pid = int(reply["pid"])
+        except (OSError, ValueError, KeyError, TypeError):
+            os.close(log_r)
+            os.close(status_r)
+            self.close()
+            return None
+        finally:
+            os.close(log_w)
+            os.close(status_w)
+        return _ForkedProcess(pid, os.fdopen(log_r, "rb"), status_r)
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self._sock.close()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(5)
+        if self.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+        self._scratch.cleanup()
+
+
+_ZYGOTE: dict[str, _Zygote] = {}
+_ZYGOTE_LOCK = threading.Lock()
+
+
+def _zygote(env: dict) -> _Zygote | None:
+    """This process's zygote, started on first use (None where ``fork`` or descriptor passing is missing).
+
+    ``env`` is the scrubbed environment of a sealed process (the zygote gets its own scratch
+    directory as ``HOME``/``TMPDIR``). The zygote is a fresh interpreter: whenever it is started,
+    it holds nothing of this process's memory.
+    """
+    if not (hasattr(os, "fork") and hasattr(socket, "send_fds") and sys.platform.startswith("linux")):
+        return None
+    if os.environ.get("FUELHM_BENCH_ZYGOTE", "1") == "0":
+        return None
+    with _ZYGOTE_LOCK:
+        z = _ZYGOTE.get("z")
+        if z is not None and not z.alive():
+            if z.owner == os.getpid():
+                z.close()
+            z = None
+        if z is None:
+            try:
+                z = _ZYGOTE["z"] = _Zygote({k: v for k, v in env.items()
+                                            if k not in ("HOME", "TMPDIR", "MPLCONFIGDIR", "NUMBA_CACHE_DIR")})
+            except OSError:
+                return None
+        return z
+
+
+def prestart_zygote() -> None:
+    """Start this process's zygote now (it imports its modules while the caller builds data)."""
+    _zygote(_sealed_env(tempfile.gettempdir(), _import_path()))
+
+
+@atexit.register
+def _stop_zygote() -> None:
+    z = _ZYGOTE.pop("z", None)
+    if z is not None and z.owner == os.getpid():
+        z.close()
+
+
 class SealedMethod:
     """A method running in its own sealed process; the caller drives it call by call.
 
@@ -264,6 +432,12 @@ class SealedMethod:
     deny : sequence of path-like, default=()
         Paths the method must not read (simulation cache, output folder): an
         import-path directory that contains one is not made readable.
+    zygote : bool, default=True
+        Fork the sealed process from this process's zygote (a clean interpreter
+        with the harness's dependencies imported, see
+        :mod:`fuelhm_bench.methods._zygote`) instead of starting a fresh
+        interpreter; the isolation is the same. Ignored where ``fork`` is not
+        available.
 
     Examples
     --------
@@ -272,7 +446,7 @@ class SealedMethod:
     """
 
     def __init__(self, method: Any, *, params: dict | None = None, shared_params: dict | None = None,
-                 limits: Limits | dict | None = None, log_path=None, deny=()):
+                 limits: Limits | dict | None = None, log_path=None, deny=(), zygote: bool = True):
         self.method = method
         self.params = dict(params or {})
         self.shared_params = dict(shared_params or {})
@@ -280,6 +454,7 @@ class SealedMethod:
         self.log_path = None if log_path is None else Path(log_path)
         self.deny = [str(Path(d).resolve()) for d in deny if d]
         self.name = method if isinstance(method, str) else type(method).__name__
+        self.zygote = bool(zygote)
         self.info: dict = {}
         self.sandbox = "not started"
         self._proc = None
@@ -296,18 +471,16 @@ class SealedMethod:
         self._scratch = tempfile.TemporaryDirectory(prefix="fuelhm-sealed-")
         scratch = self._scratch.name
         parent_sock, child_sock = socket.socketpair()
-        env = {k: v for k, v in os.environ.items()
-               if k in ("PATH", "LANG", "LC_ALL", "LC_CTYPE", "TZ", "SYSTEMROOT")}
-        path = [os.path.abspath(p) for p in ([os.getcwd()] + sys.path) if p]
-        env.update({"HOME": scratch, "TMPDIR": scratch, "PYTHONPATH": os.pathsep.join(dict.fromkeys(path)),
-                    "PYTHONDONTWRITEBYTECODE": "1", "PYTHONHASHSEED": "0", "MPLBACKEND": "Agg",
-                    "MPLCONFIGDIR": scratch, "NUMBA_CACHE_DIR": scratch,
-                    "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+        path = _import_path()
+        env = _sealed_env(scratch, path)
         self._deadline = time.monotonic() + _STARTUP_S  # the interpreter and the harness's imports
-        self._proc = subprocess.Popen(
-            [sys.executable, "-m", "fuelhm_bench.methods._sealed_child", str(child_sock.fileno())],
-            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=scratch, env=env,
-            pass_fds=(child_sock.fileno(),), start_new_session=True, close_fds=True)
+        zygote = _zygote(env) if self.zygote else None
+        self._proc = zygote.spawn(scratch, env, child_sock) if zygote is not None else None
+        if self._proc is None:  # no zygote here (not POSIX, disabled, or it could not start): a fresh interpreter
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "fuelhm_bench.methods._sealed_child", str(child_sock.fileno())],
+                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=scratch, env=env,
+                pass_fds=(child_sock.fileno(),), start_new_session=True, close_fds=True)
         child_sock.close()
         self._conn = Connection(parent_sock.detach())
         self._pump = _LogPump(self._proc.stdout, self.log_path, int(self.limits.log_kb * 1024))

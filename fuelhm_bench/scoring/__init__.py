@@ -33,35 +33,28 @@ to_markdown, to_latex, write_tables, plot_score_distributions, save_figure
 See docs/scoring.md for every definition with worked examples.
 """
 
-from fuelhm_bench.scoring.bootstrap import INTERVAL_KPIS, kpi_intervals, scorecard_intervals
-from fuelhm_bench.scoring.calibration import (brier_score, guilt_calibration, plot_reliability,
-                                              reliability_table)
-from fuelhm_bench.scoring.config import ScoringConfig
-from fuelhm_bench.scoring.cost import maintenance_cost, total_cost
-from fuelhm_bench.scoring.delay import delay_summary, detection_delays
-from fuelhm_bench.scoring.detection import (ALL_MODES, METHOD_ALARM, detection_by_band,
-                                            detection_table)
-from fuelhm_bench.scoring.diagnosis import (classification_table, confusion_matrix,
-                                            diagnosis_table)
-from fuelhm_bench.scoring.export import to_latex, to_markdown, write_tables
-from fuelhm_bench.scoring.figures import plot_score_distributions, save_figure
-from fuelhm_bench.scoring.intervals import (bootstrap_ratio_interval, rates_with_intervals,
-                                            wilson_interval)
-from fuelhm_bench.scoring.reference import null_decisions, perfect_decisions
-from fuelhm_bench.scoring.robustness import (
-    degradation_summary,
-    drift_sweep_table,
-    error_rate_changes,
-    robustness,
-    robustness_table,
-)
-from fuelhm_bench.scoring.ranking import (cd_diagram, critical_difference, friedman_test,
-                                          mean_ranks, rank_matrix, wilcoxon_holm)
-from fuelhm_bench.scoring.run import (HEALTHY, LABEL_COLUMNS, MULTIPLE, NO_ALARM, TIE, Run,
-                                      flight_table)
-from fuelhm_bench.scoring.scorecard import HEADLINE_KPIS, Scorecard, headline_kpis, score_run
-from fuelhm_bench.scoring.summary import summary_components, summary_score
-from fuelhm_bench.scoring.thresholds import HealthyScoreModel, fit_healthy_model, threshold_table
+import importlib
+
+_HOMES = {  # public name -> its module: imported on first use (PEP 562), so that importing one
+    # submodule (e.g. scoring.config, as the scenario schema does) does not import scipy.stats and matplotlib
+    **dict.fromkeys(('INTERVAL_KPIS', 'kpi_intervals', 'scorecard_intervals'), "bootstrap"),
+    **dict.fromkeys(('brier_score', 'guilt_calibration', 'plot_reliability', 'reliability_table'), "calibration"),
+    **dict.fromkeys(('ScoringConfig',), "config"),
+    **dict.fromkeys(('maintenance_cost', 'total_cost'), "cost"),
+    **dict.fromkeys(('delay_summary', 'detection_delays'), "delay"),
+    **dict.fromkeys(('ALL_MODES', 'METHOD_ALARM', 'detection_by_band', 'detection_table'), "detection"),
+    **dict.fromkeys(('classification_table', 'confusion_matrix', 'diagnosis_table'), "diagnosis"),
+    **dict.fromkeys(('to_latex', 'to_markdown', 'write_tables'), "export"),
+    **dict.fromkeys(('plot_score_distributions', 'save_figure'), "figures"),
+    **dict.fromkeys(('bootstrap_ratio_interval', 'rates_with_intervals', 'wilson_interval'), "intervals"),
+    **dict.fromkeys(('null_decisions', 'perfect_decisions'), "reference"),
+    **dict.fromkeys(('degradation_summary', 'drift_sweep_table', 'error_rate_changes', 'robustness', 'robustness_table'), "robustness"),
+    **dict.fromkeys(('cd_diagram', 'critical_difference', 'friedman_test', 'mean_ranks', 'rank_matrix', 'wilcoxon_holm'), "ranking"),
+    **dict.fromkeys(('HEALTHY', 'LABEL_COLUMNS', 'MULTIPLE', 'NO_ALARM', 'TIE', 'Run', 'flight_table'), "run"),
+    **dict.fromkeys(('HEADLINE_KPIS', 'Scorecard', 'headline_kpis', 'score_run'), "scorecard"),
+    **dict.fromkeys(('summary_components', 'summary_score'), "summary"),
+    **dict.fromkeys(('HealthyScoreModel', 'fit_healthy_model', 'threshold_table'), "thresholds"),
+}
 
 __all__ = [
     "INTERVAL_KPIS", "brier_score", "cd_diagram", "critical_difference", "friedman_test",
@@ -77,3 +70,18 @@ __all__ = [
     "save_figure", "score_run", "summary_components", "summary_score", "threshold_table",
     "to_latex", "to_markdown", "total_cost", "wilson_interval", "write_tables",
 ]
+
+
+def __getattr__(name: str):
+    module = _HOMES.get(name)
+    if module is None:
+        raise AttributeError(f"module 'fuelhm_bench.scoring' has no attribute {name!r}")
+    loaded = importlib.import_module(f"fuelhm_bench.scoring.{module}")
+    for other, home in _HOMES.items():  # every name of that module, which also puts the function
+        if home == module:              # robustness back over the submodule the import system bound
+            globals()[other] = getattr(loaded, other)
+    return globals()[name]
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
