@@ -51,7 +51,7 @@ def test_split_training_holds_out_half_the_units():
     table = _unit_table(9, 2, np.random.default_rng(0))
     fit, cal = split_training(table)
     assert set(cal["unit_id"]) == {5, 6, 7, 8} and set(fit["unit_id"]) == {0, 1, 2, 3, 4}
-    fit1, cal1 = split_training(table[table["unit_id"] < 3])  # low_data's 3 units: 2 fit, 1 calibrates
+    fit1, cal1 = split_training(table[table["unit_id"] < 3])  # 3 units: 2 fit, 1 calibrates (low_data v2)
     assert set(cal1["unit_id"]) == {2} and set(fit1["unit_id"]) == {0, 1}
     # the extended indicators are optional columns; the paper's row is required
     from fuelhm_bench.errors import DataFormatError
