@@ -108,3 +108,26 @@ def test_healthy_false_alarm_rate_at_a2_is_gaussian(name):
     (r,) = calibrated
     assert abs(r.population_rate - GAUSSIAN_FAR_A2) <= FAR_TOLERANCE, r
     assert r.ci_low <= GAUSSIAN_FAR_A2 <= r.ci_high, r
+
+
+def test_split_rates_measure_the_spread_over_training_fleets():
+    """split_rates redraws the training fleet's units from a pool: deterministic for a seed, different draws
+    differ, and on Gaussian unit-dominated rows the mean rate is near the Gaussian tail (the paper method's
+    chi-like score puts it a little above 2.3 %)."""
+    from fuelhm_bench.benchmark.false_alarms import split_rates
+    from fuelhm_bench.errors import ParameterError
+    from fuelhm_bench.scenarios import load_scenario
+
+    import dataclasses
+
+    sc = load_scenario("paper_2012")
+    sc = dataclasses.replace(sc, training=dataclasses.replace(sc.training, units=40))  # 40 units x 2 flights
+    pool = _unit_table(240, 2, np.random.default_rng(3))
+    rates = split_rates(sc, n_splits=3, seed=1, pool=pool)
+    assert rates.shape == (3,) and len(set(rates)) > 1
+    np.testing.assert_array_equal(rates, split_rates(sc, n_splits=3, seed=1, pool=pool))
+    assert 0.005 <= rates.mean() <= 0.08, rates
+    with pytest.raises(ParameterError, match="more than the 40 units"):
+        split_rates(sc, n_splits=1, pool=pool[pool["unit_id"] < 30])
+    with pytest.raises(ParameterError, match="'n_splits' parameter of split_rates must be an int >= 1"):
+        split_rates(sc, n_splits=0, pool=pool)
