@@ -132,3 +132,12 @@ def test_split_rates_measure_the_spread_over_training_fleets():
         split_rates(sc, n_splits=1, pool=pool[pool["unit_id"] < 30])
     with pytest.raises(ParameterError, match="'n_splits' parameter of split_rates must be an int >= 1"):
         split_rates(sc, n_splits=0, pool=pool)
+
+
+def test_false_alarms_cli_rejects_a_negative_number_of_splits(capsys):
+    from fuelhm_bench.benchmark.false_alarms import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["paper_2012", "--splits", "-1"])
+    assert info.value.code == 2
+    assert "--splits must be an int >= 0. Got -1 instead." in capsys.readouterr().err
