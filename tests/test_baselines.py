@@ -543,9 +543,16 @@ def _low_data_fit_table(data: CheckData) -> pd.DataFrame:
 
     training = load_scenario("low_data").training
     n_fit_units = training.units - max(1, training.units // 2)
-    units = list(dict.fromkeys(data.healthy["unit_id"]))[:n_fit_units]
-    table = data.healthy[data.healthy["unit_id"].isin(units)]
-    table = table[table["flight_index"] < training.flights_per_unit].reset_index(drop=True)
+    units = list(dict.fromkeys(data.healthy["unit_id"]))
+    if len(units) >= n_fit_units:
+        table = data.healthy[data.healthy["unit_id"].isin(units[:n_fit_units])]
+        table = table[table["flight_index"] < training.flights_per_unit].reset_index(drop=True)
+    else:  # more units than the check data have: the same number of flights, each relabelled as a unit
+        per_unit = -(-n_fit_units * training.flights_per_unit // len(units))
+        table = data.healthy[data.healthy["flight_index"] < per_unit].head(n_fit_units * training.flights_per_unit)
+        table = table.reset_index(drop=True)
+        table["unit_id"] = [f"{u}-{i // training.flights_per_unit}" for i, u in enumerate(table["unit_id"])]
+        table["flight_index"] = np.arange(len(table)) % training.flights_per_unit
     # 5-fold cross-fitting leaves fewer flights per fold than a 10-indicator Mahalanobis model needs
     assert len(table) == n_fit_units * training.flights_per_unit
     assert len(table) - math.ceil(len(table) / 5) < len(IND) + 1
@@ -577,7 +584,7 @@ def test_standardisation_needs_three_flights():
 
 @pytest.mark.slow
 def test_every_baseline_runs_on_the_shipped_low_data_scenario(tmp_path):
-    """The shipped low_data scenario itself (its 3 x 6 training flights), surrogate fidelity, small scale."""
+    """The shipped low_data scenario itself (its 24 x 1 training flights), surrogate fidelity, small scale."""
     from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
     from sizes import knowledge_size
 

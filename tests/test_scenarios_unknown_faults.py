@@ -182,3 +182,48 @@ def test_library_only_classifier_gets_no_diagnosis_credit_on_unknown_faults():
     assert kpis["blind"]["summary_score"] == pytest.approx(50.0)   # perfect on the leak, nothing on the unknown
     assert kpis["blind"]["summary_score"] < kpis["names_a_mode"]["summary_score"] < kpis["says_unknown"][
         "summary_score"]
+
+
+# --------------------------------------------------------------------------- environment
+def _env_with_certain_fault():
+    """paper_2012 with torque-motor play in every unit that draws no mode, from flight 1, on short flights."""
+    from fuelhm_bench.envs.actuation_loop import ActuationLoopEnv
+
+    block = FAULT.replace("probability: 0.5", "probability: 1.0").replace("onset_min: 5", "onset_min: 1") \
+                 .replace("onset_max: 15", "onset_max: 1").replace("width_a: 0.0005", "width_a: 0.003")
+    sc = parse_scenario(_with_faults(block))
+    return ActuationLoopEnv(scenario=sc, fidelity="physics", maintenance=True, flight_minutes=FLIGHT_MINUTES)
+
+
+def test_drawn_units_get_unknown_faults_and_the_rewards_charge_them():
+    """A drawn (not replayed) unit without a mode gets the scenario's unknown fault, like a scored-fleet unit.
+    Its flights are faulty for the rewards: flying it without an alarm costs an undetected flight, an alarm is a
+    correct maintenance that removes it (the next flight is flown without the fault, whose torque-motor play
+    widens Hys0)."""
+    from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+    env = _env_with_certain_fault()
+    costs = env.scenario.costs
+    drawn = []
+    for seed in range(12):
+        env.reset(seed=seed)
+        drawn.append((seed, env._schedule))
+    without_mode = [(s, sch) for s, sch in drawn if not sch.schedules]
+    assert without_mode, "no drawn unit without a mode in 12 seeds (30 % each)"
+    assert all(sch.unknown is not None and sch.unknown.effect == "torque_motor_hysteresis"
+               and sch.unknown_onset == 1 for _, sch in without_mode)
+    assert all(sch.unknown is None for _, sch in drawn if sch.schedules)
+    hys0 = INDICATOR_NAMES.index("Hys0")
+    obs0, _ = env.reset(seed=without_mode[0][0])
+    no_alarm = {"alarm": 0, "guilt": np.zeros(len(MODE_IDS), dtype=np.float32)}
+    obs1, r0, *_ = env.step(no_alarm)                     # decision on flight 0: healthy
+    _, r1, *_ = env.step(no_alarm)                        # flight 1: the fault, not seen
+    obs3, r2, *_ = env.step({**no_alarm, "alarm": 1})     # flight 2: alarm, correct maintenance
+    _, r3, *_ = env.step(no_alarm)                        # flight 3: repaired, healthy again
+    assert (r0, r1, r2, r3) == (0.0, -costs.undetected_flight_kusd, -costs.repair_kusd, 0.0)
+    hys = [float(o["indicators"][hys0]) for o in (obs0, obs1, obs3)]
+    assert hys[1] > 3 * hys[0] and hys[2] < 2 * hys[0], hys
+    truth = env.episode_truth()
+    assert truth["detectable"].tolist() == [False, True, True, False]
+    assert truth["repaired"].tolist() == [False, False, True, False]
+    assert truth["unknown_fault"] == "torque_motor_hysteresis"

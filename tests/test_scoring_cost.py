@@ -180,3 +180,42 @@ def test_a_cost_model_without_its_fields_is_refused():
     labels = _labels({0: {}}, 3)
     with pytest.raises(ParameterError, match="'costs' parameter of maintenance_cost.*failure_kusd"):
         maintenance_cost(Run(labels=labels, decisions=null_decisions(labels), healthy_scores=np.zeros(20)), object())
+
+
+def _with_unknown(labels: pd.DataFrame, onsets: dict[int, int]) -> pd.DataFrame:
+    """Labels with a fault outside the seven modes from flight ``onsets[unit]`` (-1 elsewhere)."""
+    out = labels.copy()
+    out["onset_unknown"] = out["unit_id"].map(lambda u: onsets.get(int(u), -1)).astype(np.int64)
+    return out
+
+
+def test_a_fault_outside_the_seven_modes_is_not_healthy_for_the_cost():
+    """An unknown fault is detectable from its onset: never alarming pays every flight after it (no failure
+    law, so no failure); the healthy alarm rate behind the replayed flights' expected cost ignores its flights."""
+    labels = _with_unknown(_labels({0: {}, 1: {}}, 6), {0: 2})
+    never = _cost(labels, null_decisions(labels)).set_index("unit_id")
+    assert never.loc[0, "undetected_flights"] == 4 and never.loc[0, "failures"] == 0
+    assert never.loc[0, "cost_kusd"] == 4 * COSTS.undetected_flight_kusd
+    assert never.loc[1, "cost_kusd"] == 0.0
+    from fuelhm_bench.scoring.cost import healthy_alarm_rate
+
+    alarm = (labels["unit_id"] == 0).to_numpy() & (labels["flight_index"] >= 2).to_numpy()  # only on the fault
+    run = Run(labels=labels, decisions=_decisions(labels, alarm, np.zeros(len(labels), dtype=int)),
+              healthy_scores=np.zeros(20))
+    assert healthy_alarm_rate(run) == 0.0
+
+
+def test_an_unknown_fault_is_repaired_only_when_no_single_library_mode_is_named():
+    """Alarm on the onset flight: a uniform guilt (no single mode) finds and repairs the fault, after which the
+    recorded flights are replayed at the expected false-alarm cost; naming one mode finds no fault and the unit
+    keeps flying with it."""
+    labels = _with_unknown(_labels({0: {}}, 5), {0: 1})
+    alarm = np.array([False, True, False, False, False])
+    uniform = _decisions(labels, alarm, np.zeros(5, dtype=int))
+    uniform.loc[alarm, list(GUILT_COLUMNS)] = 1.0 / len(MODE_IDS)
+    row = _cost(labels, uniform).iloc[0]
+    assert (row["repairs"], row["no_fault_found"], row["undetected_flights"], row["replayed_flights"]) == (1, 0, 0, 3)
+    assert row["cost_kusd"] == COSTS.repair_kusd  # the run's healthy alarm rate is 0 (no healthy flight alarms)
+    named = _cost(labels, _decisions(labels, alarm, np.zeros(5, dtype=int))).iloc[0]
+    assert (named["repairs"], named["no_fault_found"], named["undetected_flights"]) == (0, 1, 3)
+    assert named["cost_kusd"] == COSTS.false_alarm_kusd + 3 * COSTS.undetected_flight_kusd

@@ -26,11 +26,22 @@ the drifted scored fleet (what the robustness KPIs measure: a drifted healthy
 unit may look abnormal) and on the same fleet without the drift (what the
 calibration controls).
 
+Both rates are also draws of the *training fleet*: another fleet of the same
+size would set another ``mu`` and ``sigma`` (and fit another model).
+:func:`split_rates` measures that spread: it pools the training units and the
+population's new units (same model, never drifted), draws the training fleet's
+units from the pool again and again (``n_splits`` random draws), splits each
+draw as the harness does (:func:`~fuelhm_bench.benchmark.harness.split_training`),
+fits the paper's method in this process, and returns the rate of each draw's
+threshold on the units left in the pool. Their mean says what the calibration
+gives on average, their spread how far one shipped fleet may land from it.
+
 Run it from the command line (about two minutes of CPU for a 30-unit scenario with a
 cold cache; measured 2 min on paper_2012)::
 
     python -m fuelhm_bench.benchmark.false_alarms                 # every shipped scenario
     python -m fuelhm_bench.benchmark.false_alarms paper_2012 --a 2
+    python -m fuelhm_bench.benchmark.false_alarms paper_2012 --splits 30   # + spread over training fleets
 """
 
 from __future__ import annotations
@@ -45,7 +56,7 @@ import pandas as pd
 from fuelhm_bench.errors import FuelHMError
 from fuelhm_bench.scoring.thresholds import fit_healthy_model
 
-__all__ = ["PAPER_METHOD", "FalseAlarmRate", "healthy_false_alarm_rate", "main"]
+__all__ = ["PAPER_METHOD", "FalseAlarmRate", "healthy_false_alarm_rate", "main", "split_rates"]
 
 #: Size of the published knowledge simulated for the measurement: the paper method's score does not
 #: depend on it (only its diagnosis does), so the smallest design of experiments that builds it is used.
@@ -171,6 +182,76 @@ def healthy_false_alarm_rate(scenario, *, a: float = 2.0, knowledge_size=None, c
     return out
 
 
+def split_rates(scenario, *, a: float = 2.0, n_splits: int = 20, seed: int = 0, cache_dir=None,
+                pool=None) -> np.ndarray:
+    """Healthy false-alarm rate at ``mu + a sigma`` for ``n_splits`` random draws of the training fleet's units.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        A shipped name, a YAML path or a loaded scenario.
+    a : float, default=2.0
+        ``A`` of the threshold (>= 0).
+    n_splits : int, default=20
+        Random draws (>= 1).
+    seed : int, default=0
+        Seed of the draws.
+    cache_dir : str, path-like, False or None, default=None
+        Simulation cache (:mod:`fuelhm_bench.datasets.cache`).
+    pool : pandas.DataFrame or None, default=None
+        Healthy indicator table to draw from (``unit_id``, ``flight_index``, the
+        observation columns); None: the scenario's training fleet extended by
+        ``POPULATION_UNITS`` new units, 2 flights each (the fleet and population
+        of :func:`healthy_false_alarm_rate`, without drift).
+
+    Returns
+    -------
+    numpy.ndarray of shape (n_splits,)
+        Per draw: the training fleet's units (``training.units``, their first
+        ``training.flights_per_unit`` flights) are drawn from the pool without
+        replacement and split by :func:`~fuelhm_bench.benchmark.harness.split_training`;
+        the paper's method is fitted on the fit part, its threshold set on the
+        calibration part, and the rate is the share of the flights of the pool's
+        other units above it.
+
+    Raises
+    ------
+    ParameterError
+        ``n_splits`` < 1, ``a`` < 0, or a pool without more units than the training fleet.
+    """
+    from fuelhm_bench.benchmark.harness import split_training
+    from fuelhm_bench.datasets.cache import resolve_scenario, training_indicators
+    from fuelhm_bench.errors import ParameterError
+    from fuelhm_bench.methods import run_table
+    from fuelhm_bench.methods.loading import load_method
+
+    if not (isinstance(n_splits, (int, np.integer)) and not isinstance(n_splits, bool) and n_splits >= 1):
+        raise ParameterError(f"The 'n_splits' parameter of split_rates must be an int >= 1. Got {n_splits!r} instead.")
+    if not (isinstance(a, (int, float)) and not isinstance(a, bool) and a >= 0):
+        raise ParameterError(f"The 'a' parameter of split_rates must be a number >= 0. Got {a!r} instead.")
+    sc = resolve_scenario(scenario)
+    n_train, per_unit = sc.training.units, sc.training.flights_per_unit
+    if pool is None:
+        pool = training_indicators(sc, units=n_train + POPULATION_UNITS, flights=2, cache_dir=cache_dir)
+    units = np.array(list(dict.fromkeys(pool["unit_id"])))
+    if len(units) <= n_train:
+        raise ParameterError(f"The 'pool' parameter of split_rates must hold more than the {n_train} units of the "
+                             f"training fleet of {sc.id}. Got {len(units)} units instead.")
+    rng = np.random.default_rng(seed)
+    rates = np.empty(n_splits)
+    for k in range(n_splits):
+        order = rng.permutation(units)
+        drawn = pd.DataFrame({"unit_id": order[:n_train]})
+        train = drawn.merge(pool[pool["flight_index"] < per_unit], on="unit_id", how="left", sort=False)
+        fit, cal = split_training(train)
+        method = load_method(PAPER_METHOD, {"a": float(a)})
+        method.fit(fit, knowledge=None, random_state=0)
+        threshold = fit_healthy_model(run_table(method, cal)["score"]).threshold(float(a))
+        rest = pool[pool["unit_id"].isin(set(order[n_train:]))].reset_index(drop=True)
+        rates[k] = float(np.mean(run_table(method, rest[list(fit.columns)])["score"].to_numpy() > threshold))
+    return rates
+
+
 def _unit_bootstrap(alarms: np.ndarray, units: np.ndarray, n_resamples: int = 2000,
                     seed: int = 0) -> tuple[float, float, float]:
     """Alarm rate and its 95 % percentile interval, resampling units (seeded)."""
@@ -195,9 +276,14 @@ def main(argv=None) -> int:
                                             "(calibration units of the training fleet) on shipped scenarios.")
     p.add_argument("scenarios", nargs="*", help="scenario names or YAML files (default: every shipped one)")
     p.add_argument("--a", type=float, default=2.0, help="A of the threshold (default 2)")
+    p.add_argument("--splits", type=int, default=0,
+                   help="also print the rate's mean and spread over this many random draws of the training "
+                        "fleet's units (split_rates; default 0: not measured)")
     args = p.parse_args(argv)
     if not (args.a >= 0):
         p.error(f"--a must be a number >= 0. Got {args.a!r} instead.")
+    if args.splits < 0:
+        p.error(f"--splits must be an int >= 0. Got {args.splits!r} instead.")
     names = args.scenarios or list_scenarios()
     print(f"Gaussian tail at A = {args.a:g}: {100 * norm.sf(args.a):.2f} %")
     print("FAR: healthy flights of the scored fleet above mu + A sigma of the calibration scores; population: "
@@ -212,6 +298,13 @@ def main(argv=None) -> int:
                       f"{r.healthy_flights:>10d} / {r.healthy_units:<4d} {r.calibration_flights:>9d} / "
                       f"{r.calibration_units:<4d} {100 * r.population_rate:12.2f} "
                       f"{100 * r.population_ci_low:6.2f}-{100 * r.population_ci_high:<6.2f}", flush=True)
+            if args.splits:
+                rates = split_rates(name, a=args.a, n_splits=args.splits)
+                inside = np.mean(np.abs(rates - norm.sf(args.a)) <= 0.015)
+                print(f"{'':24s} over {args.splits} draws of the training fleet's units: mean "
+                      f"{100 * rates.mean():.2f} %, sd {100 * rates.std():.2f}, 5-95 % "
+                      f"{100 * np.percentile(rates, 5):.2f}-{100 * np.percentile(rates, 95):.2f} %, "
+                      f"within 1.5 points of the Gaussian tail: {100 * inside:.0f} % of draws", flush=True)
     except FuelHMError as exc:
         print(f"false_alarms: {exc}", file=sys.stderr)
         return 2

@@ -17,7 +17,7 @@ from fuelhm_bench.datasets.cache import KnowledgeSize, resolve_scenario, surroga
 from fuelhm_bench.envs.surrogate import SurrogateModel
 from fuelhm_bench.errors import DataFormatError, ParameterError
 from fuelhm_bench.flights.fleet import build_units, mission_rng, noise_rng, rng_for, unit_rng
-from fuelhm_bench.flights.schedule import draw_unit_schedule
+from fuelhm_bench.flights.schedule import UnitSchedule, draw_unit_schedule, draw_unknown_fault
 from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS
 
 __all__ = ["ActuationLoopEnv", "EXTENDED_INDICATOR_BOUNDS", "FIDELITIES", "INDICATOR_BOUNDS", "RAW_BOUNDS"]
@@ -49,7 +49,9 @@ RAW_BOUNDS: dict[str, tuple[float, float]] = {"current_mA": (-50.0, 50.0), "posi
 
 _STREAM_SURROGATE = 20  # fleet streams are 0-2, DOE streams 10-12
 _N_MODES = len(MODE_IDS)
-_ALL = (1 << _N_MODES) - 1
+#: Bit of the unit's fault outside the seven modes in the per-flight bitmasks (after the modes' bits).
+_UNKNOWN_BIT = 1 << _N_MODES
+_ALL = (1 << (_N_MODES + 1)) - 1
 _BITS = np.array([1 << j for j in range(_N_MODES)], dtype=np.int64)
 _LOW = np.array([INDICATOR_BOUNDS[n][0] for n in INDICATOR_NAMES], dtype=np.float32)
 _HIGH = np.array([INDICATOR_BOUNDS[n][1] for n in INDICATOR_NAMES], dtype=np.float32)
@@ -204,7 +206,10 @@ class ActuationLoopEnv(gym.Env):
     ``costs``. A fault is *detectable* on a flight when one of its modes has an
     intensity >= ``detectable_fraction`` x that mode's ``max_intensity``; it
     causes an *in-flight failure* on the flight where it reaches
-    ``failure_fraction`` x ``max_intensity``.
+    ``failure_fraction`` x ``max_intensity``. A fault outside the seven modes
+    (the scenario's ``unknown_faults``) acts at full strength from its onset:
+    it is detectable on every flight from then on and, having no failure law,
+    never causes an in-flight failure.
 
     | decision on flight t                  | reward                                                        |
     |---------------------------------------|---------------------------------------------------------------|
@@ -222,8 +227,9 @@ class ActuationLoopEnv(gym.Env):
 
     ``maintenance=True`` (default, for control): a correct maintenance (alarm
     with a detectable fault present) or an in-flight failure repairs the unit
-    after the flight: every mode active on that flight is removed and does not
-    recur in the episode (modes scheduled to start later still do). A false
+    after the flight: every mode active on that flight, and a fault outside the
+    seven modes present on it, is removed and does not recur in the episode
+    (modes scheduled to start later still do). A false
     alarm changes nothing. ``maintenance=False`` (for the paper's KPIs, and
     what :mod:`fuelhm_bench.benchmark.harness` uses): alarms are only scored, faults
     evolve as scheduled whatever the agent does, and each mode's failure is
@@ -232,7 +238,8 @@ class ActuationLoopEnv(gym.Env):
     ## Starting State
 
     ``reset()`` starts a new unit drawn from the scenario's scored-fleet
-    distributions (manufacturing dispersion, which modes occur, their onsets)
+    distributions (manufacturing dispersion, which modes occur, their onsets, and
+    a fault outside the seven modes for a unit that drew no mode, as in the fleet)
     with the environment's own generator ``self.np_random``;
     ``reset(options={"unit": k})`` replays unit ``k`` of the scenario's scored
     fleet instead (0 <= k < ``fleet.units``), fixed by the scenario's test seed
@@ -254,8 +261,8 @@ class ActuationLoopEnv(gym.Env):
     (n,), ``intensity`` (n, 7, flown, after repairs), ``max_intensity`` (7,),
     ``onset`` (7,; -1 for absent modes), ``detectable``, ``failure``,
     ``repaired`` (n,), ``cost_kusd`` (n,), ``unknown_fault`` (the effect id of
-    the unit's fault outside the seven modes, "" without one; it is never
-    repaired and does not enter the rewards) and ``unknown_onset`` (-1 without). With
+    the unit's fault outside the seven modes, "" without one; ``detectable``
+    includes it, ``intensity`` does not) and ``unknown_onset`` (-1 without). With
     ``reset(options={"evaluation": True})`` every ``info`` also carries
     ``"truth"`` for the flight in the observation (``intensity``,
     ``max_intensity``, ``onset``, ``detectable``, ``failure``) and every step's
@@ -290,6 +297,9 @@ class ActuationLoopEnv(gym.Env):
 
     ## Version History
 
+    * v2 (robustness_drift v5): a fault outside the seven modes enters the rewards (detectable
+      from its onset, repaired by a correct maintenance) and drawn units get the scenario's
+      ``unknown_faults`` like the scored fleet's units; before, its flights were rewarded as healthy.
     * v2: the observation gains ``"extended"`` and ``"extended_valid"``: the eleven extended
       indicators (velocities at fixed currents, null scatter, rest fraction, and the issue-11
       supply-pressure indicators ``Hys_lo``, ``Hys_hi``, ``I0_slope``, which need N2 per sample).
@@ -508,6 +518,9 @@ class ActuationLoopEnv(gym.Env):
         n = self.n_flights
         if unit is None:
             schedule = draw_unit_schedule(config.schedules, self.np_random, simultaneous=config.simultaneous)
+            if config.unknown_faults and not schedule.schedules:  # as a scored-fleet unit (flights.fleet)
+                fault, fault_onset = draw_unknown_fault(config.unknown_faults, self.np_random)
+                schedule = UnitSchedule(unknown=fault, unknown_onset=fault_onset)
             key = int(self.np_random.integers(0, 2**63 - 1))
             self._unit_id, self._seed, self._slot, self._model = -1, key, 0, None
         else:
@@ -531,8 +544,13 @@ class ActuationLoopEnv(gym.Env):
         present = intensity > 0.0
         self._schedule = schedule
         self._intensity, self._max, self._onset = intensity, max_intensity, onset
-        self._present_bits = _bitmask(present)
-        self._det_bits = _bitmask(present & (intensity >= costs.detectable_fraction * max_intensity))
+        # A fault outside the seven modes acts at full strength from its onset: present and detectable
+        # from then on; it has no failure law, so it never fails in flight.
+        unknown = (np.where(flights >= schedule.unknown_onset, _UNKNOWN_BIT, 0) if schedule.unknown is not None
+                   else np.zeros(n, dtype=np.int64))
+        self._present_bits = [b | int(u) for b, u in zip(_bitmask(present), unknown)]
+        self._det_bits = [b | int(u) for b, u in
+                          zip(_bitmask(present & (intensity >= costs.detectable_fraction * max_intensity)), unknown)]
         self._fail_bits = _bitmask(present & (intensity >= costs.failure_fraction * max_intensity))
         self._active, self._failed = _ALL, 0
         self._active_log, self._fail_log, self._repair_log, self._cost_log = [], [], [], []
@@ -581,8 +599,9 @@ class ActuationLoopEnv(gym.Env):
                            if active >> MODE_IDS.index(s.mode) & 1 else 0.0)
                   for s in self._schedule.schedules}
         model = self._model.degraded(intens)
-        for effect in self._schedule.effects(t):  # a fault outside the seven modes (never repaired)
-            model = model.with_effect(effect)
+        if active & _UNKNOWN_BIT:  # a fault outside the seven modes, until a maintenance removes it
+            for effect in self._schedule.effects(t):
+                model = model.with_effect(effect)
         inputs = self._config.mission.sample(mission_rng(self._seed, self._slot, t))
         noise = noise_rng(self._seed, self._slot, t)
         where = f"unit {self._unit_id}, flight {t}" if self._unit_id >= 0 else f"drawn unit, flight {t}"

@@ -21,6 +21,15 @@ protocol the cost model describes:
    that flight comes too late to prevent it), after which the unit is overhauled:
    every present mode is removed.
 
+A fault outside the seven modes (labels ``onset_unknown`` >= 0, the scenario's
+``unknown_faults``) acts at full strength from its onset: it is present and
+detectable on every flight from then on and, with no failure law, never fails.
+No guilt column names it, so an inspection finds it when the diagnosis does not
+name a single library mode (several tied modes, or a uniform guilt: "something is
+wrong, not one of the seven"), the rule by which the scorer judges its diagnosis;
+it is then repaired and removed like a mode. An inspection that names one mode
+repairs that mode if it is detectable and otherwise finds no fault.
+
 A removed mode still shows in the recorded flights, so the method's recorded
 decision on a later flight does not tell what it would have said on the
 repaired unit. On such *replayed* flights (a removed mode is still present in
@@ -42,7 +51,7 @@ import numpy as np
 import pandas as pd
 
 from fuelhm_bench.methods.tables import GUILT_COLUMNS
-from fuelhm_bench.scoring.run import INTENSITY_COLUMNS, MAX_INTENSITY_COLUMNS, Run
+from fuelhm_bench.scoring.run import INTENSITY_COLUMNS, MAX_INTENSITY_COLUMNS, UNKNOWN_ONSET_COLUMN, Run
 
 __all__ = ["COST_COLUMNS", "COST_FIELDS", "maintenance_cost", "total_cost"]
 
@@ -68,11 +77,21 @@ def _model(costs) -> dict[str, float]:
     return {f: float(getattr(costs, f)) for f in COST_FIELDS}
 
 
+def _unknown_present(labels: pd.DataFrame) -> np.ndarray:
+    """Flights carrying a fault outside the seven modes (from its onset on; all False without the column)."""
+    if UNKNOWN_ONSET_COLUMN not in labels.columns:
+        return np.zeros(len(labels), dtype=bool)
+    onset = labels[UNKNOWN_ONSET_COLUMN].to_numpy(dtype=float)
+    return (onset >= 0) & (labels["flight_index"].to_numpy(dtype=float) >= onset)
+
+
 def healthy_alarm_rate(run: Run) -> float:
-    """Alarm rate of the run's method on its healthy flights (no mode present; 0 when there are none)."""
-    merged = run.labels[["unit_id", "flight_index", *INTENSITY_COLUMNS]].merge(
+    """Alarm rate of the run's method on its healthy flights (no mode and no fault outside the seven
+    present; 0 when there are none)."""
+    extra = [UNKNOWN_ONSET_COLUMN] if UNKNOWN_ONSET_COLUMN in run.labels.columns else []
+    merged = run.labels[["unit_id", "flight_index", *INTENSITY_COLUMNS, *extra]].merge(
         run.decisions[["unit_id", "flight_index", "alarm"]], on=["unit_id", "flight_index"])
-    healthy = (merged[list(INTENSITY_COLUMNS)].to_numpy(dtype=float) <= 0).all(axis=1)
+    healthy = (merged[list(INTENSITY_COLUMNS)].to_numpy(dtype=float) <= 0).all(axis=1) & ~_unknown_present(merged)
     return float(merged["alarm"].to_numpy(dtype=bool)[healthy].mean()) if healthy.any() else 0.0
 
 
@@ -125,14 +144,16 @@ def maintenance_cost(run: Run, costs) -> pd.DataFrame:
     mx = labels[list(MAX_INTENSITY_COLUMNS)].to_numpy(dtype=float)
     alarm = decisions["alarm"].to_numpy(dtype=bool)
     guilt = decisions[list(GUILT_COLUMNS)].to_numpy(dtype=float)
-    rows = [_replay_unit(unit, inten[idx], mx[idx], alarm[idx], guilt[idx], c, p_fa)
+    unknown = _unknown_present(labels)
+    rows = [_replay_unit(unit, inten[idx], mx[idx], alarm[idx], guilt[idx], c, p_fa, unknown[idx])
             for unit, idx in labels.groupby("unit_id", sort=False).indices.items()]
     return pd.DataFrame(rows, columns=list(COST_COLUMNS))
 
 
 def _replay_unit(unit, inten: np.ndarray, mx: np.ndarray, alarm: np.ndarray, guilt: np.ndarray,
-                 c: dict[str, float], p_fa: float) -> dict:
+                 c: dict[str, float], p_fa: float, unknown: np.ndarray) -> dict:
     removed = np.zeros(inten.shape[1], dtype=bool)
+    unknown_removed = False
     n = {"inspections": 0, "repairs": 0, "no_fault_found": 0, "undetected_flights": 0, "failures": 0,
          "replayed_flights": 0}
     expected_fa = 0.0
@@ -140,23 +161,28 @@ def _replay_unit(unit, inten: np.ndarray, mx: np.ndarray, alarm: np.ndarray, gui
         present = (inten[t] > 0) & ~removed
         detectable = present & (inten[t] >= c["detectable_fraction"] * mx[t])
         failing = present & (inten[t] >= c["failure_fraction"] * mx[t])
-        replayed = bool(((inten[t] > 0) & removed).any()) and not detectable.any()
+        outside = bool(unknown[t]) and not unknown_removed  # present and detectable from its onset
+        replayed = (bool(((inten[t] > 0) & removed).any()) or (bool(unknown[t]) and unknown_removed)) and not (
+            detectable.any() or outside)
         if replayed:
             n["replayed_flights"] += 1
             expected_fa += p_fa * c["false_alarm_kusd"]
         elif alarm[t]:
             n["inspections"] += 1
             blamed = guilt[t] >= guilt[t].max()
-            if (blamed & detectable).any():
+            found_outside = outside and int(blamed.sum()) != 1  # no single library mode named
+            if (blamed & detectable).any() or found_outside:
                 n["repairs"] += 1
                 removed |= blamed & present
+                unknown_removed = unknown_removed or found_outside
             else:
                 n["no_fault_found"] += 1
-        elif detectable.any():
+        elif detectable.any() or outside:
             n["undetected_flights"] += 1
         if failing.any():
             n["failures"] += 1
             removed |= present
+            unknown_removed = unknown_removed or outside  # the overhaul removes it too
     out = {"unit_id": unit, "flights": int(inten.shape[0]), **n,
            "repair_kusd": n["repairs"] * c["repair_kusd"],
            "false_alarm_kusd": n["no_fault_found"] * c["false_alarm_kusd"],
