@@ -192,3 +192,23 @@ def test_fleet_values_beyond_the_input_models_transition_are_applied():
     r = apply_values(m, {"servovalve.transition_start": end + 0.1, "servovalve.transition_end": end + 0.2})
     assert r.servovalve.transition_start == pytest.approx(end + 0.1)
     assert r.servovalve.transition_end == pytest.approx(end + 0.2)
+
+
+def test_a_value_at_the_dispersion_limit_counts_only_if_it_trades_off_against_the_effect():
+    # LVDT lag 2x on altsim data (study seed 1010): the plausible fit named 94.2 ms with one unit's load at
+    # the 5 sigma limit, while the free fit of the same candidate gave 93.9 ms and a held-out gap no better.
+    from fuelhm_bench.calibration.candidates import get_candidates
+    from fuelhm_bench.calibration.discrepancy import CandidateOutcome, SetMember, trades_off
+
+    cand = get_candidates(["lvdt_lag"])[0]
+    member = SetMember("lvdt_lag", {"time_constant_s": 0.0942}, (), 12.3, 0.840, 1e4)
+
+    def free(tau, gap):
+        return CandidateOutcome("lvdt_lag", {"time_constant_s": tau}, 0.0, 1e4, 1.0, gap, 0.9, True, 60, 1.0, {})
+
+    assert not trades_off(member, 0.840, [free(0.0939, 0.817)], cand, 0.1)
+    assert trades_off(member, 0.840, [free(0.070, 0.817)], cand, 0.1)     # the limit moves the effect's value
+    assert trades_off(member, 0.840, [free(0.0939, 0.600)], cand, 0.1)    # releasing it explains more
+    assert trades_off(member, 0.840, [], cand, 0.1)                       # nothing to compare with: absorbing
+    with pytest.raises(ParameterError):
+        DiscrepancyConfig(tradeoff_tolerance=1.5)
