@@ -212,3 +212,12 @@ def test_a_value_at_the_dispersion_limit_counts_only_if_it_trades_off_against_th
     assert trades_off(member, 0.840, [], cand, 0.1)                       # nothing to compare with: absorbing
     with pytest.raises(ParameterError):
         DiscrepancyConfig(tradeoff_tolerance=1.5)
+
+
+@pytest.mark.slow
+def test_law_check_sees_the_library_overlap_in_the_altsim_lap_and_nothing_in_healthy_data():
+    from fuelhm_bench.validation.study import law_check
+
+    rows = {(r["data"], r["band"]): r for r in law_check("spool_overlap", n_units=1, minutes=4.0)}
+    assert abs(rows[("healthy", "all")]["slope"]) < 0.2
+    assert 0.7 < rows[("effect", "all")]["slope"] < 1.3 and rows[("effect", "all")]["correlation"] > 0.8
