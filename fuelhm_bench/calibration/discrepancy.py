@@ -979,6 +979,13 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         if not eligible:
             break
         best = min(eligible, key=lambda c: c.bic)
+        if not best.bounded and absorbing_parameters(best.unit_values, start, z_max=config.absorbed_z):
+            # The free fit keeps values no manufactured unit has: when the plausible fit of the same effect
+            # is eligible too, it is the explanation (its values are plausible; whether the values it leaves
+            # at the dispersion limit trade off against the effect is checked for the verdict).
+            plausible = [c for c in eligible if c.effect == best.effect and c.bounded and c.tag == best.tag]
+            if plausible:
+                best = plausible[0]
         for c in eligible:
             if (c.effect != best.effect and c.effect not in {e.alternative for e in equivalents}
                     and c.gap_reduction >= best.gap_reduction - config.equivalence_margin):
