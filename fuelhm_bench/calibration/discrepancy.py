@@ -763,6 +763,20 @@ def is_eligible(outcome: CandidateOutcome, *, bic_threshold: float, min_gap_redu
     return ok
 
 
+def best_explanation(eligible: Sequence[CandidateOutcome], start_model, absorbed_z: float) -> CandidateOutcome:
+    """The eligible fit that explains the data: the lowest BIC, except that a free fit keeping values
+    beyond ``absorbed_z`` dispersion sigmas (values no manufactured unit has) gives way to the plausible
+    (bounded) fit of the same effect and round when that one is eligible too -- its values are
+    plausible, and whether those it leaves at the band's limit trade off against the effect is checked
+    for the verdict (:func:`trades_off`)."""
+    best = min(eligible, key=lambda c: c.bic)
+    if not best.bounded and absorbing_parameters(best.unit_values, start_model, z_max=absorbed_z):
+        plausible = [c for c in eligible if c.effect == best.effect and c.bounded and c.tag == best.tag]
+        if plausible:
+            return min(plausible, key=lambda c: c.bic)
+    return best
+
+
 def trades_off(member: "SetMember", gap_bounded: float, free: Sequence[CandidateOutcome], cand: EffectCandidate,
                tolerance: float) -> bool:
     """Whether recalibration values sitting at their dispersion limit trade off against a named effect.
@@ -978,14 +992,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         eligible = [c for c in round_outcomes if is_eligible(c, **round_rule)]
         if not eligible:
             break
-        best = min(eligible, key=lambda c: c.bic)
-        if not best.bounded and absorbing_parameters(best.unit_values, start, z_max=config.absorbed_z):
-            # The free fit keeps values no manufactured unit has: when the plausible fit of the same effect
-            # is eligible too, it is the explanation (its values are plausible; whether the values it leaves
-            # at the dispersion limit trade off against the effect is checked for the verdict).
-            plausible = [c for c in eligible if c.effect == best.effect and c.bounded and c.tag == best.tag]
-            if plausible:
-                best = plausible[0]
+        best = best_explanation(eligible, start, config.absorbed_z)
         for c in eligible:
             if (c.effect != best.effect and c.effect not in {e.alternative for e in equivalents}
                     and c.gap_reduction >= best.gap_reduction - config.equivalence_margin):
@@ -1111,4 +1118,5 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
-           "correlation_time", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off"]
+           "correlation_time", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
+           "best_explanation"]
