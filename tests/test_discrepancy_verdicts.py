@@ -192,3 +192,55 @@ def test_fleet_values_beyond_the_input_models_transition_are_applied():
     r = apply_values(m, {"servovalve.transition_start": end + 0.1, "servovalve.transition_end": end + 0.2})
     assert r.servovalve.transition_start == pytest.approx(end + 0.1)
     assert r.servovalve.transition_end == pytest.approx(end + 0.2)
+
+
+def test_a_value_at_the_dispersion_limit_counts_only_if_it_trades_off_against_the_effect():
+    # LVDT lag 2x on altsim data (study seed 1010): the plausible fit named 94.2 ms with one unit's load at
+    # the 5 sigma limit, while the free fit of the same candidate gave 93.9 ms and a held-out gap no better.
+    from fuelhm_bench.calibration.candidates import get_candidates
+    from fuelhm_bench.calibration.discrepancy import CandidateOutcome, SetMember, trades_off
+
+    cand = get_candidates(["lvdt_lag"])[0]
+    member = SetMember("lvdt_lag", {"time_constant_s": 0.0942}, (), 12.3, 0.840, 1e4)
+
+    def free(tau, gap):
+        return CandidateOutcome("lvdt_lag", {"time_constant_s": tau}, 0.0, 1e4, 1.0, gap, 0.9, True, 60, 1.0, {})
+
+    assert not trades_off(member, 0.840, [free(0.0939, 0.817)], cand, 0.1)
+    assert trades_off(member, 0.840, [free(0.070, 0.817)], cand, 0.1)     # the limit moves the effect's value
+    assert trades_off(member, 0.840, [free(0.0939, 0.600)], cand, 0.1)    # releasing it explains more
+    assert trades_off(member, 0.840, [], cand, 0.1)                       # nothing to compare with: absorbing
+    with pytest.raises(ParameterError):
+        DiscrepancyConfig(tradeoff_tolerance=1.5)
+
+
+@pytest.mark.slow
+def test_law_check_sees_the_library_overlap_in_the_altsim_lap_and_nothing_in_healthy_data():
+    from fuelhm_bench.validation.study import law_check
+
+    rows = {(r["data"], r["band"]): r for r in law_check("spool_overlap", n_units=1, minutes=4.0)}
+    assert abs(rows[("healthy", "all")]["slope"]) < 0.2
+    assert 0.7 < rows[("effect", "all")]["slope"] < 1.3 and rows[("effect", "all")]["correlation"] > 0.8
+
+
+def test_a_free_fit_with_implausible_values_gives_way_to_the_eligible_plausible_fit_of_the_same_effect():
+    # Load stiffness 1x on altsim data (study seed 2011): the free fit (34.1 kN/m) kept the aerodynamic
+    # load at -35 sigma, the plausible fit (34.0 kN/m) was eligible too.
+    from fuelhm_bench.calibration.discrepancy import CandidateOutcome, best_explanation
+
+    nominal = LoopModel()
+    aero = "load.aero_force_at_100pct_n"
+    sigma = dispersion_sigma(nominal, aero)
+    far, near = {0: {aero: nominal.get(aero) - 35 * sigma}}, {0: {aero: nominal.get(aero) - 5 * sigma}}
+
+    def oc(bounded, bic, uv, effect="load_stiffness"):
+        return CandidateOutcome(effect, {"stiffness_n_m": 3.4e4}, bic, 6000.0, 1.0, 0.38, 0.75, True, 60, 1.0, uv,
+                                bounded=bounded)
+
+    free, plausible = oc(False, -100.0, far), oc(True, 80.0, near)
+    assert best_explanation([free, plausible], nominal, 5.0) is plausible
+    # Free values within the dispersion: the lowest BIC stands.
+    assert best_explanation([oc(False, -100.0, near), plausible], nominal, 5.0).bounded is False
+    # No eligible plausible fit of the same effect: the free fit stands (the verdict then flags its values).
+    other = oc(True, 50.0, near, effect="rod_friction")
+    assert best_explanation([free, other], nominal, 5.0) is free

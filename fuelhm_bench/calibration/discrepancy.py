@@ -135,6 +135,12 @@ class DiscrepancyConfig:
     absorbed_z : float, default=5.0
         ... or a value of the final fit at least this many dispersion sigmas from the input model
         (a disagreement absorbed by the recalibration that no candidate explains).
+    tradeoff_tolerance : float, default=0.1
+        A value of a plausible (bounded) final fit sitting at its dispersion limit counts as absorbing
+        only if it trades off against the named effect: releasing the limit (the free fit of the
+        same candidate) moves the effect's main parameter by more than this fraction, or improves
+        the held-out gap by more than this fraction. Otherwise the limit holds structural
+        mismatch that the effect's estimate does not depend on, and it stays a flag only.
     """
 
     calibration: CalibrationConfig = field(default_factory=lambda: CalibrationConfig(fit_max_frames=40000))
@@ -154,11 +160,12 @@ class DiscrepancyConfig:
     unexplained_ratio: float = 2.0
     unexplained_score: float = 30.0
     absorbed_z: float = 5.0
+    tradeoff_tolerance: float = 0.1
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_effects, int) or isinstance(self.max_effects, bool) or self.max_effects < 1:
             raise range_error("DiscrepancyConfig.max_effects", "an integer >= 1", self.max_effects)
-        for name in ("min_step_reduction", "equivalence_margin"):
+        for name in ("min_step_reduction", "equivalence_margin", "tradeoff_tolerance"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 <= v < 1.0):
                 raise range_error(f"DiscrepancyConfig.{name}", "in [0, 1)", v)
@@ -198,7 +205,9 @@ class DiscrepancyConfig:
                 f"verdict 'unexplained' when the final held-out gap is >= {self.unexplained_ratio:g}x its noise "
                 f"floor and its misfit score >= {self.unexplained_score:g}, or a value of the final fit lies "
                 f">= {self.absorbed_z:g} dispersion sigmas from the input model (or at that limit in a fit kept "
-                f"within it); else the set ('effect') or 'none'")
+                f"within it and trading off against the named effect: releasing it moves the effect's main parameter or "
+                f"the held-out gap by more than {100 * self.tradeoff_tolerance:g} %); else the set ('effect') or "
+                f"'none'")
 
 
 @dataclass(frozen=True)
@@ -754,6 +763,46 @@ def is_eligible(outcome: CandidateOutcome, *, bic_threshold: float, min_gap_redu
     return ok
 
 
+def best_explanation(eligible: Sequence[CandidateOutcome], start_model, absorbed_z: float) -> CandidateOutcome:
+    """The eligible fit that explains the data: the lowest BIC, except that a free fit keeping values
+    beyond ``absorbed_z`` dispersion sigmas (values no manufactured unit has) gives way to the plausible
+    (bounded) fit of the same effect and round when that one is eligible too -- its values are
+    plausible, and whether those it leaves at the band's limit trade off against the effect is checked
+    for the verdict (:func:`trades_off`)."""
+    best = min(eligible, key=lambda c: c.bic)
+    if not best.bounded and absorbing_parameters(best.unit_values, start_model, z_max=absorbed_z):
+        plausible = [c for c in eligible if c.effect == best.effect and c.bounded and c.tag == best.tag]
+        if plausible:
+            return min(plausible, key=lambda c: c.bic)
+    return best
+
+
+def trades_off(member: "SetMember", gap_bounded: float, free: Sequence[CandidateOutcome], cand: EffectCandidate,
+               tolerance: float) -> bool:
+    """Whether recalibration values sitting at their dispersion limit trade off against a named effect.
+
+    The named effect was fitted with the recalibration kept within the dispersion (bounded) and
+    some value ends at the band's limit. Releasing the limit is the free fit of the same candidate
+    (``free``: its outcomes). The limit trades off against the effect -- the effect's value depends
+    on where the band is cut, or the released value explains the held-out data better -- when the
+    free fit's main parameter (the candidate's first fitted one) differs from the bounded one by more
+    than ``tolerance`` (relative), or its held-out gap is smaller by more than ``tolerance``
+    (relative). Without a free fit to compare with, it is assumed to trade off.
+    """
+    if not free:
+        return True
+    name = cand.parameters[0].path.rsplit(".", 1)[-1]
+    a = float(member.parameters.get(name, float("nan")))
+    f = free[0]
+    b = float(f.parameters.get(name, float("nan")))
+    scale = max(abs(a), abs(b))
+    if not (math.isfinite(a) and math.isfinite(b)) or scale == 0.0:
+        return True
+    moved = abs(a - b) / scale > tolerance
+    better = f.gap_after < (1.0 - tolerance) * gap_bounded
+    return moved or better
+
+
 def decide(outcomes: Sequence[CandidateOutcome], *, bic_threshold: float, min_gap_reduction: float) -> str:
     """Apply the decision rule (:attr:`DiscrepancyConfig.decision_rule`): an effect id or ``"none"``.
 
@@ -943,7 +992,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         eligible = [c for c in round_outcomes if is_eligible(c, **round_rule)]
         if not eligible:
             break
-        best = min(eligible, key=lambda c: c.bic)
+        best = best_explanation(eligible, start, config.absorbed_z)
         for c in eligible:
             if (c.effect != best.effect and c.effect not in {e.alternative for e in equivalents}
                     and c.gap_reduction >= best.gap_reduction - config.equivalence_margin):
@@ -1007,6 +1056,15 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     # A fit kept within the dispersion that ends at its limit wants to go beyond it: absorbed too.
     limit_hits = at_limit(final_fit.unit_values, [p for p in cur["params"] if dispersion_sigma(start, p.path)
                                                   and p not in params])
+    if limit_hits and len(members) == 1 and not trades_off(
+            members[0], cur["gap"], [c for c in outcomes if c.effect == members[0].effect and not c.bounded
+                                     and c.tag == "1" and not c.held],
+            next(c for c in cands if c.effect == members[0].effect), config.tradeoff_tolerance):
+        say("values at the dispersion limit do not trade off against " + members[0].effect
+            + " (its free fit gives the same parameter and no better held-out gap): flagged, not absorbing")
+        exempt = set(limit_hits)
+        final_flags = tuple(f for f in final_flags if (f.unit, f.path) not in exempt)
+        limit_hits = ()
     if limit_hits:
         hit = set(limit_hits)
         extra = tuple(f for f in absorbing_parameters(final_fit.unit_values, start, z_max=0.0)
@@ -1060,4 +1118,5 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
-           "correlation_time", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout"]
+           "correlation_time", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
+           "best_explanation"]

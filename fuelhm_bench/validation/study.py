@@ -6,6 +6,7 @@ Run as a command (it takes tens of minutes; it is not part of the test run)::
         [--seed-offset 1000] [--dump DIR]
     python -m fuelhm_bench.validation.study --markdown study*.csv     # the table of docs/discrepancy.md
     python -m fuelhm_bench.validation.study --why DIR                 # per-case diagnosis from --dump
+    python -m fuelhm_bench.validation.study --law-check rod_friction  # library law vs the look-alike
 
 Each case simulates a fleet with :func:`~fuelhm_bench.validation.altsim.simulate_flights`
 (healthy, a library look-alike at 1/3, 1 and 2 times its reference magnitude, an effect
@@ -185,6 +186,75 @@ def why_table(dumps) -> str:
     return "\n".join(lines)
 
 
+#: Reference laws compared by :func:`law_check`: library effect and parameters at the reference magnitude.
+LAW_CHECKS = {
+    "spool_overlap": ("spool_overlap", {"overlap_m": 15e-6}),
+    "rod_friction": ("rod_friction", {"coulomb_n": 500.0, "static_ratio": 1.0}),
+    "spool_flow_force": ("spool_flow_force", {"stiffness_ratio": 0.12}),
+    "lvdt_lag": ("lvdt_lag", {"time_constant_s": 0.05}),
+    "load_stiffness": ("load_stiffness", {"stiffness_n_m": 3e4, "reference_m": 0.03}),
+}
+
+
+def law_check(effect: str, *, n_units: int = 2, n_flights: int = 2, minutes: float = 5.0, seed: int = 7,
+              bands=(0.0, 2.0, 10.0, 40.0, float("inf"))) -> list[dict]:
+    """Does the library's law reproduce the altsim look-alike's signature where recalibration cannot interfere?
+
+    The same units are simulated healthy and with the altsim effect at its reference magnitude
+    (:data:`REFERENCE`). The model is recalibrated per unit on the *healthy* flights only; with these
+    unit values, the library effect at the reference magnitude (:data:`LAW_CHECKS`) gives a predicted
+    velocity change ``x = v(model + effect) - v(model)``, and the effect data's residual is
+    ``r = v_measured - v(model)``. The least-squares slope ``r.x / x.x`` is 1 where the library's law
+    reproduces the look-alike at the same magnitude, 0 where the library predicts a change that the
+    data do not show. Returned per band of the model's |velocity| [mm/s] and overall (``band`` "all"),
+    with the RMS of ``x`` and ``r`` [mm/s] and their correlation; the healthy data give the
+    reference (slope near 0).
+    """
+    import numpy as np
+
+    from fuelhm_bench.calibration import replay as rp
+    from fuelhm_bench.calibration.fit import fit_joint
+    from fuelhm_bench.calibration.recalibrate import (RECALIBRATION_PARAMETERS, CalibrationConfig, model_for_data,
+                                                      prepare_units)
+    from fuelhm_bench.io import split_flights
+    from fuelhm_bench.physics.model import LoopModel
+
+    field_, ref, _ = REFERENCE[effect]
+    lib_id, lib_params = LAW_CHECKS[effect]
+    frame_s = 0.01
+    start = model_for_data(LoopModel(), frame_s)
+    cal = CalibrationConfig(fit_max_frames=16000)
+    data = {}
+    for tag, eff in (("healthy", AltEffects()), ("effect", AltEffects(**{field_: ref}))):
+        flights, _ = split_flights(simulate_flights(eff, n_units=n_units, n_flights=n_flights, minutes=minutes,
+                                                    seed=seed))
+        data[tag] = prepare_units(flights, start, cal, frame_s=frame_s, max_frames=16000, seed=0)
+    keys = list(data["healthy"])
+    base = fit_joint({k: start for k in keys}, data["healthy"], tuple(RECALIBRATION_PARAMETERS), max_iterations=25)
+    m0 = [base.unit_models[k] for k in keys]
+    m1 = [m.with_effect(lib_id, **lib_params) for m in m0]
+    out = []
+    for tag, sets in data.items():
+        ss = [sets[k] for k in keys]
+        v0 = np.concatenate(rp.replay_batch(m0, ss))
+        v1 = np.concatenate(rp.replay_batch(m1, ss))
+        meas = np.concatenate([s.v_meas_mm_s for s in ss])
+        sc = np.concatenate([s.scored for s in ss])
+        r, x, vm = (meas - v0)[sc], (v1 - v0)[sc], np.abs(v0[sc])
+        ok = np.isfinite(r) & np.isfinite(x)
+        r, x, vm = r[ok], x[ok], vm[ok]
+        edges = [("all", np.ones(r.shape, bool))] + [
+            (f"{lo:g}-{hi:g}", (vm >= lo) & (vm < hi)) for lo, hi in zip(bands[:-1], bands[1:])]
+        for name, sel in edges:
+            if sel.sum() < 100 or not np.any(x[sel]):
+                continue
+            out.append({"data": tag, "band": name, "n": int(sel.sum()),
+                        "slope": float(r[sel] @ x[sel] / (x[sel] @ x[sel])),
+                        "rms_library": float(x[sel].std()), "rms_residual": float(r[sel].std()),
+                        "correlation": float(np.corrcoef(r[sel], x[sel])[0, 1])})
+    return out
+
+
 def main(argv=None) -> int:
     """Command line: run the cases, print and write a CSV table."""
     import pandas as pd
@@ -202,7 +272,13 @@ def main(argv=None) -> int:
     p.add_argument("--why", default=None, help="only print the diagnosis table of a --dump directory")
     p.add_argument("--markdown", nargs="*", default=None,
                    help="only print the markdown table of these CSV files of earlier runs (then --out is ignored)")
+    p.add_argument("--law-check", default=None, choices=sorted(LAW_CHECKS),
+                   help="only print the law check of one look-alike (law_check)")
     a = p.parse_args(argv)
+    if a.law_check:
+        for row in law_check(a.law_check):
+            print(" | ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()))
+        return 0
     from pathlib import Path
 
     if a.why:
