@@ -8,4 +8,4 @@ __version__ = "0.2.0"  # the one source of the version (pyproject.toml reads it)
 
 __all__ = ["EFFECT_IDS", "INDICATOR_NAMES", "INDICATOR_UNITS", "MODE_IDS", "__version__"]
 
-from fuelhm_bench import envs  # noqa: E402,F401 - registers FuelHM/ActuationLoop-v2 with gymnasium
+from fuelhm_bench import envs  # noqa: E402,F401 - registers FuelHM/ActuationLoop-v3 with gymnasium

@@ -1,4 +1,4 @@
-"""Throughput of FuelHM/ActuationLoop-v2 in flights per second (run separately; not part of the unit tests).
+"""Throughput of FuelHM/ActuationLoop-v3 in flights per second (run separately; not part of the unit tests).
 
     pytest tests/bench_envs.py -m benchmark -p no:cacheprovider
 
@@ -39,7 +39,7 @@ def _episodes(env, n_episodes: int, seed: int = 0) -> int:
 
 @pytest.mark.benchmark(group="envs")
 def test_surrogate_throughput(benchmark):
-    env = gym.make("FuelHM/ActuationLoop-v2", scenario="all_modes", fidelity="surrogate")
+    env = gym.make("FuelHM/ActuationLoop-v3", scenario="all_modes", fidelity="surrogate")
     _episodes(env, 5)
     n_episodes = 200
     flights = benchmark.pedantic(_episodes, args=(env, n_episodes), rounds=5, iterations=1)
@@ -52,7 +52,7 @@ def test_surrogate_throughput(benchmark):
 @pytest.mark.benchmark(group="envs")
 @pytest.mark.parametrize("flight_minutes", [None, 2.0], ids=["scenario-20min", "short-2min"])
 def test_physics_throughput(benchmark, flight_minutes):
-    env = gym.make("FuelHM/ActuationLoop-v2", scenario="all_modes", fidelity="physics",
+    env = gym.make("FuelHM/ActuationLoop-v3", scenario="all_modes", fidelity="physics",
                    flight_minutes=flight_minutes)
     env.reset(seed=0)  # compile
     env.step(ACTION)

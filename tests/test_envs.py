@@ -1,4 +1,4 @@
-"""FuelHM/ActuationLoop-v2: conformance (check_env on every id x shipped scenario x fidelity), determinism,
+"""FuelHM/ActuationLoop-v3: conformance (check_env on every id x shipped scenario x fidelity), determinism,
 vectorisation, pickling, the cost model, truth handling, the surrogate against the physics, the knowledge
 cache and bad input.
 
@@ -31,7 +31,7 @@ from sizes import FLIGHT_MINUTES, TINY_FLIGHTS, TINY_UNITS, knowledge_size
 from fuelhm_bench.scenarios import CostSpec, DegradationSpec, list_scenarios, load_scenario
 from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS
 
-ENV_ID = "FuelHM/ActuationLoop-v2"
+ENV_ID = "FuelHM/ActuationLoop-v3"
 ENV_IDS = sorted(i for i in gym.registry if i.startswith("FuelHM/"))
 MINUTES = FLIGHT_MINUTES
 SMALL = knowledge_size()
@@ -93,10 +93,10 @@ def step_fault(mode, onset, *, growth="step", ramp=1):
 def test_registration_is_lazy_and_idempotent():
     code = ("import sys, gymnasium as gym, fuelhm_bench.envs as e; e.register_envs(); "
             "assert 'fuelhm_bench.envs.actuation_loop' not in sys.modules; "
-            "assert gym.spec('FuelHM/ActuationLoop-v2').entry_point.endswith(':ActuationLoopEnv'); print('ok')")
+            "assert gym.spec('FuelHM/ActuationLoop-v3').entry_point.endswith(':ActuationLoopEnv'); print('ok')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
-    assert ENV_IDS == ["FuelHM/ActuationLoop-v2"]
+    assert ENV_IDS == ["FuelHM/ActuationLoop-v3"]
 
 
 @pytest.mark.parametrize("fidelity", ["physics", "surrogate"])
@@ -116,13 +116,13 @@ def test_check_env_every_id_scenario_and_fidelity(cache_dir, env_id, scenario, f
 
 
 def test_unknown_version_names_the_current_one():
-    with pytest.raises(gym.error.Error, match="v2"):
-        gym.make("FuelHM/ActuationLoop-v3")
+    with pytest.raises(gym.error.Error, match="v3"):
+        gym.make("FuelHM/ActuationLoop-v4")
 
 
-@pytest.mark.parametrize("retired", ["v0", "v1"])
+@pytest.mark.parametrize("retired", ["v0", "v1", "v2"])
 def test_retired_version_names_the_current_one(retired):
-    with pytest.raises(gym.error.DeprecatedEnv, match=rf"{retired}.*deprecated.*FuelHM/ActuationLoop-v2"):
+    with pytest.raises(gym.error.DeprecatedEnv, match=rf"{retired}.*deprecated.*FuelHM/ActuationLoop-v3"):
         gym.make(f"FuelHM/ActuationLoop-{retired}")
 
 
@@ -131,7 +131,7 @@ def test_make_with_module_prefix_and_path(cache_dir, tmp_path):
 
     path = tmp_path / "mine.yaml"
     path.write_text(yaml.safe_dump(small_scenario(name="mine").to_dict(), sort_keys=False))
-    env = gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v2", scenario=str(path), fidelity="physics",
+    env = gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v3", scenario=str(path), fidelity="physics",
                    flight_minutes=MINUTES)
     assert env.unwrapped.scenario.name == "mine"
     assert env.unwrapped.n_flights == 8

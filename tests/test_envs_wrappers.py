@@ -17,7 +17,7 @@ from fuelhm_bench.envs.wrappers import (AlarmOnlyAction, KeepEpisodeTruth, Norma
                                         healthy_statistics)
 from fuelhm_bench.errors import ParameterError
 
-ENV_ID = "FuelHM/ActuationLoop-v2"
+ENV_ID = "FuelHM/ActuationLoop-v3"
 DOC = Path(__file__).resolve().parents[1] / "docs" / "rl.md"
 
 

@@ -1,4 +1,4 @@
-"""The runner: methods of the common interface through FuelHM/ActuationLoop-v2, safely.
+"""The runner: methods of the common interface through FuelHM/ActuationLoop-v3, safely.
 
 A tiny scenario (3 units x 8 flights, 4 x 4 training flights, 2-minute flights) keeps every test fast.
 """

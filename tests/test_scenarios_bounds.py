@@ -67,7 +67,7 @@ def test_billion_laughs_through_gym_make(tmp_path):
     path = tmp_path / "lol.yaml"
     path.write_text(billion_laughs())
     with pytest.raises(FuelHMError, match=re.escape(str(path))):
-        gym.make("FuelHM/ActuationLoop-v2", scenario=str(path))
+        gym.make("FuelHM/ActuationLoop-v3", scenario=str(path))
 
 
 @pytest.mark.parametrize("text", [

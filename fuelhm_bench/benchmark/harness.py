@@ -2,7 +2,7 @@
 
 The runner is the adapter between a :class:`fuelhm_bench.methods.BaseMethod`
 (or any object with ``fit``, ``start_unit`` and ``decide``) and
-``FuelHM/ActuationLoop-v2``: one episode per unit of the scenario's scored
+``FuelHM/ActuationLoop-v3``: one episode per unit of the scenario's scored
 fleet (``reset(options={"unit": k})``, maintenance off, so faults evolve as
 scheduled as in the paper's KPIs), and for every flight
 
@@ -68,7 +68,7 @@ _ROW_INDEX = pd.Index(["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES,
 
 # --------------------------------------------------------------------------- the adapter
 def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_id: Any = None) -> pd.Series:
-    """The indicator row a method sees for one observation of ``FuelHM/ActuationLoop-v2``.
+    """The indicator row a method sees for one observation of ``FuelHM/ActuationLoop-v3``.
 
     Parameters
     ----------
@@ -107,7 +107,7 @@ def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_i
 
 
 def action_from_decision(decision) -> dict:
-    """The action of ``FuelHM/ActuationLoop-v2`` for a :class:`~fuelhm_bench.methods.Decision`.
+    """The action of ``FuelHM/ActuationLoop-v3`` for a :class:`~fuelhm_bench.methods.Decision`.
 
     Returns
     -------

@@ -14,7 +14,7 @@ def register(sub) -> None:
                        description="Get the scenario's published knowledge (ITL, signatures) and healthy training "
                                    "flights (simulated once, then cached), then run each method sealed (its own "
                                    "process, limits, only the observation rows): fit, then play every unit of the "
-                                   "scored fleet as an episode of FuelHM/ActuationLoop-v2 (maintenance off), the "
+                                   "scored fleet as an episode of FuelHM/ActuationLoop-v3 (maintenance off), the "
                                    "method deciding flight by flight. Results go to a results store (resumable); "
                                    "KPI tables (Tables V and VI, FCR, confusion, delays, bands, confidence "
                                    "intervals, robustness under drift, cost) and reports are generated from it. A "

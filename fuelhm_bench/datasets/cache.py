@@ -454,7 +454,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
                       progress: Callable[[int], object] | None = None, workers: int = 1) -> pd.DataFrame:
     """Indicator table of the scenario's scored fleet, as flown without maintenance, cached.
 
-    These are the physics observations of ``FuelHM/ActuationLoop-v2`` replaying
+    These are the physics observations of ``FuelHM/ActuationLoop-v3`` replaying
     units ``0 .. units - 1`` with ``maintenance=False``
     (:meth:`ActuationLoopEnv.load_replays <fuelhm_bench.envs.ActuationLoopEnv.load_replays>`):
     simulated once, then shared by every method evaluated.

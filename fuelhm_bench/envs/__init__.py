@@ -5,22 +5,27 @@ Gymnasium's registry; the environment module itself (physics, indicators) is
 only imported by ``gymnasium.make``::
 
     import gymnasium as gym
-    import fuelhm_bench.envs  # registers FuelHM/ActuationLoop-v2
+    import fuelhm_bench.envs  # registers FuelHM/ActuationLoop-v3
 
-    env = gym.make("FuelHM/ActuationLoop-v2", scenario="all_modes", fidelity="surrogate")
+    env = gym.make("FuelHM/ActuationLoop-v3", scenario="all_modes", fidelity="surrogate")
 
-``gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v2")`` imports the package
+``gym.make("fuelhm_bench.envs:FuelHM/ActuationLoop-v3")`` imports the package
 itself. Versions follow Gymnasium's rule: any change that alters observations
 or rewards for the same arguments bumps ``-vN``; asking for a retired
-version names the current one (``FuelHM/ActuationLoop-v1`` -> "deprecated. Please use
-`FuelHM/ActuationLoop-v2` instead", Gymnasium's :class:`~gymnasium.error.DeprecatedEnv`).
+version names the current one (``FuelHM/ActuationLoop-v2`` -> "deprecated. Please use
+`FuelHM/ActuationLoop-v3` instead", Gymnasium's :class:`~gymnasium.error.DeprecatedEnv`).
 
 Version history
 ---------------
+v3
+    A fault outside the seven modes (a scenario's ``unknown_faults``) enters the rewards and
+    is removed by a correct maintenance; units drawn by ``reset()`` get the scenario's
+    ``unknown_faults``; a repaired unit keeps its manufacturing draws at surrogate fidelity.
+    v2 is retired.
 v2
     The observation gains the extended indicators (``"extended"``, ``"extended_valid"``),
     among them the supply-pressure indicators ``Hys_lo``, ``Hys_hi`` and ``I0_slope`` (issue 11).
-    The paper's ten and the rewards are unchanged. v1 is retired.
+    The paper's ten and the rewards are unchanged. Retired.
 v1
     Physics v2 (issue 11): operating excitation without per-frame N2 dither, degradation
     laws as mechanisms, re-sized scenarios (every shipped scenario at version 2). Scores of
@@ -57,7 +62,7 @@ MAX_EPISODE_STEPS: int = 1000
 
 #: Registered environment ids -> entry points (``"module:Class"``, imported on ``make``).
 ENV_IDS: dict[str, str] = {
-    "FuelHM/ActuationLoop-v2": "fuelhm_bench.envs.actuation_loop:ActuationLoopEnv",
+    "FuelHM/ActuationLoop-v3": "fuelhm_bench.envs.actuation_loop:ActuationLoopEnv",
 }
 
 _LAZY = {

@@ -1,4 +1,4 @@
-"""``FuelHM/ActuationLoop-v2``: the health monitoring of one actuation loop, flight by flight."""
+"""``FuelHM/ActuationLoop-v3``: the health monitoring of one actuation loop, flight by flight."""
 
 from __future__ import annotations
 
@@ -274,7 +274,7 @@ class ActuationLoopEnv(gym.Env):
     ```python
     import gymnasium as gym
     import fuelhm_bench.envs
-    env = gym.make("FuelHM/ActuationLoop-v2", scenario="all_modes", fidelity="surrogate")
+    env = gym.make("FuelHM/ActuationLoop-v3", scenario="all_modes", fidelity="surrogate")
     ```
 
     | argument        | default        | meaning                                                                     |
@@ -297,9 +297,11 @@ class ActuationLoopEnv(gym.Env):
 
     ## Version History
 
-    * v2 (robustness_drift v5): a fault outside the seven modes enters the rewards (detectable
-      from its onset, repaired by a correct maintenance) and drawn units get the scenario's
-      ``unknown_faults`` like the scored fleet's units; before, its flights were rewarded as healthy.
+    * v3: a fault outside the seven modes enters the rewards (detectable from its onset,
+      repaired by a correct maintenance, never an in-flight failure) and drawn units get the
+      scenario's ``unknown_faults`` like the scored fleet's units (v2 rewarded those flights as
+      healthy); at surrogate fidelity a repaired unit keeps its manufacturing draws. Retired v2:
+      ``gym.make("FuelHM/ActuationLoop-v2")`` raises ``DeprecatedEnv`` naming v3.
     * v2: the observation gains ``"extended"`` and ``"extended_valid"``: the eleven extended
       indicators (velocities at fixed currents, null scatter, rest fraction, and the issue-11
       supply-pressure indicators ``Hys_lo``, ``Hys_hi``, ``I0_slope``, which need N2 per sample).

@@ -1,4 +1,4 @@
-"""Wrappers that make ``FuelHM/ActuationLoop-v2`` fit off-the-shelf RL libraries.
+"""Wrappers that make ``FuelHM/ActuationLoop-v3`` fit off-the-shelf RL libraries.
 
 * :class:`AlarmOnlyAction`: a ``Discrete(2)`` action (0 = no alarm, 1 = alarm)
   instead of the ``Dict`` action most agents (e.g. stable-baselines3 PPO)
@@ -17,7 +17,7 @@ Example::
     import fuelhm_bench.envs
     from fuelhm_bench.envs.wrappers import AlarmOnlyAction, NormalizedObservation
 
-    env = NormalizedObservation(AlarmOnlyAction(gym.make("FuelHM/ActuationLoop-v2",
+    env = NormalizedObservation(AlarmOnlyAction(gym.make("FuelHM/ActuationLoop-v3",
                                                          fidelity="surrogate")))
 """
 
