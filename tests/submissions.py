@@ -6,6 +6,7 @@ into a row with a status and a one-line message, and the spies must find no grou
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import inspect
 import os
@@ -162,12 +163,10 @@ def _hunt(start_dirs, pids=()) -> list[str]:
         except OSError:
             continue
     for pid in {os.getppid(), *pids}:  # the parent process's memory (the zygote's), and the harness's
-        try:
+        with contextlib.suppress(OSError):  # unreadable memory is what the sandbox promises
             with open(f"/proc/{pid}/mem", "rb") as mem:
                 mem.read(1)
             found.append(f"memory of process {pid} readable")
-        except OSError:
-            pass
     return found
 
 

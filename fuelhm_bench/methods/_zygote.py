@@ -31,6 +31,7 @@ processes still running and exits.
 from __future__ import annotations
 
 import array
+import contextlib
 import importlib
 import json
 import os
@@ -122,11 +123,16 @@ def _reap(children: dict[int, int]) -> None:
             return
         fd = children.pop(pid, None)
         if fd is not None:
-            try:
+            with contextlib.suppress(OSError):  # the harness closed its end: nobody waits for this status
                 os.write(fd, str(status).encode())
-            except OSError:
-                pass
             os.close(fd)
+
+
+def _drain(fd: int) -> None:
+    """Read a non-blocking pipe until it is empty (the signal wake-up bytes carry no information)."""
+    with contextlib.suppress(BlockingIOError):
+        while os.read(fd, 4096):
+            continue
 
 
 def serve(control: socket.socket) -> None:
@@ -146,11 +152,7 @@ def serve(control: socket.socket) -> None:
         while True:
             for key, _ in sel.select():
                 if key.data == "wake":
-                    try:
-                        while os.read(wake_r, 4096):
-                            pass
-                    except BlockingIOError:
-                        pass
+                    _drain(wake_r)
                     _reap(children)
                     continue
                 fds = array.array("i")
@@ -182,10 +184,8 @@ def serve(control: socket.socket) -> None:
                 _reap(children)
     finally:
         for pid in list(children):  # the harness is gone: nothing it started survives
-            try:
+            with contextlib.suppress(ProcessLookupError, PermissionError):  # already gone
                 os.killpg(pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
         _reap(children)
 
 
