@@ -115,6 +115,19 @@ def test_a_killed_zygote_is_replaced_and_the_fallback_starts_an_interpreter(fres
         assert int(open(f"/proc/{m.pid}/stat").read().rsplit(")", 1)[1].split()[1]) == os.getpid()
 
 
+def test_a_method_folder_added_after_the_zygote_started_is_importable(fresh_zygote, tmp_path, monkeypatch):
+    """A forked process imports from the harness's import path of its run, not of the zygote's start."""
+    with SealedMethod(IdleCurrent(), limits={"wall_s": 60.0}) as m:  # the zygote starts with today's path
+        m.fit(_table())
+    folder = tmp_path / "late_methods"
+    folder.mkdir()
+    (folder / "late_method_module.py").write_text("from submissions import IdleCurrent as LateMethod\n")
+    monkeypatch.syspath_prepend(str(folder))
+    with SealedMethod("late_method_module:LateMethod", limits={"wall_s": 60.0}) as m:
+        assert int(open(f"/proc/{m.pid}/stat").read().rsplit(")", 1)[1].split()[1]) == fresh_zygote["z"].proc.pid
+        m.fit(_table())
+
+
 def test_closing_the_harness_side_ends_the_zygote_and_its_processes(fresh_zygote):
     m = SealedMethod(IdleCurrent(), limits={"wall_s": 60.0})
     m.start()
