@@ -15,6 +15,7 @@ every check works on clones.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import inspect
 import pickle
@@ -261,10 +262,8 @@ def _fresh(method: Any, data: CheckData, seed: int = _SEED, *, shared: bool = Tr
         except Exception:  # noqa: BLE001 - an unhashable parameter: fit anew
             key = None
         if key is not None and _FITTED and _FITTED[0][0] == key:
-            try:
+            with contextlib.suppress(Exception):  # not deep-copyable: fit anew
                 return copy.deepcopy(_FITTED[0][1])
-            except Exception:  # noqa: BLE001 - not deep-copyable: fit anew
-                pass
     _fit(m, data, seed=seed)
     if key is not None:
         try:
