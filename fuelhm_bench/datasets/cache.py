@@ -273,8 +273,11 @@ def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **par
 def _canonical(value):
     """``value`` as JSON-ready data that names every dataclass's class and holds every field and array element."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        # a field added after recipes were keyed declares ``metadata={"key": "omit-default"}``: at its
+        # default (the behaviour from before it existed) it is left out, so those recipes keep their keys
         return {"__class__": f"{type(value).__module__}.{type(value).__qualname__}",
-                **{f.name: _canonical(getattr(value, f.name)) for f in dataclasses.fields(value)}}
+                **{f.name: _canonical(getattr(value, f.name)) for f in dataclasses.fields(value)
+                   if not (f.metadata.get("key") == "omit-default" and getattr(value, f.name) == f.default)}}
     if isinstance(value, (list, tuple)):
         return [_canonical(v) for v in value]
     if isinstance(value, dict):
@@ -520,14 +523,18 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     Every unit flies its cases on ``size.surrogate_doe_missions`` missions
     (column ``replicate``), and, when the scenario's modes occur together
     (``simultaneous``), every pair of its modes at
-    ``size.surrogate_doe_pair_intensities`` (:class:`~fuelhm_bench.datasets.doe.DesignOfExperiments`).
+    ``size.surrogate_doe_pair_intensities`` (:class:`~fuelhm_bench.datasets.doe.DesignOfExperiments`),
+    and, when the scenario declares ``unknown_faults``, each of them at full strength
+    (its effect with its parameters; ``mode`` :func:`~fuelhm_bench.datasets.doe.fault_case`),
+    on the same missions: the key then names the faults, so scenarios with different
+    unknown faults never share a surrogate.
 
     Returns
     -------
     pandas.DataFrame
         The table of :func:`fuelhm_bench.datasets.doe.run_doe` (a copy).
     """
-    from fuelhm_bench.datasets.doe import _STREAM_DOE_UNIT, run_doe
+    from fuelhm_bench.datasets.doe import _STREAM_DOE_UNIT, fault_case, run_doe
     from fuelhm_bench.flights.fleet import rng_for
     from fuelhm_bench.physics.model import manufacture
 
@@ -538,6 +545,8 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     params = {"units": size.surrogate_doe_units, "intensities": list(size.surrogate_doe_intensities),
               "drifted": bool(drifted) and bool(sc.drift), "modes": list(doe.modes), "missions": doe.missions,
               "pairs": [list(pr) for pr in doe.pairs], "pair_intensities": list(doe.pair_intensities)}
+    if doe.faults:  # (absent without faults: the keys of scenarios without any are unchanged)
+        params["unknown_faults"] = [fault_case(f) for f in doe.faults]
     key = cache_key("surrogate-doe", sc, flight_minutes=flight_minutes, **params)
 
     def make() -> dict[str, pd.DataFrame]:
@@ -550,8 +559,8 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
 
 
 def _surrogate_design(sc, flight_minutes, size, drifted):
-    """The design of experiments of :func:`surrogate_doe`."""
-    from fuelhm_bench.datasets.doe import DesignOfExperiments
+    """The design of experiments of :func:`surrogate_doe` (faults of the same physics flown once)."""
+    from fuelhm_bench.datasets.doe import DesignOfExperiments, fault_case
     from fuelhm_bench.taxonomy import MODE_IDS
 
     config = _with_minutes(sc.test_fleet_config(), flight_minutes)
@@ -561,10 +570,14 @@ def _surrogate_design(sc, flight_minutes, size, drifted):
     modes = tuple(m for m in MODE_IDS if m in scheduled) or tuple(MODE_IDS)
     pairs = (tuple((a, b) for i, a in enumerate(modes) for b in modes[i + 1:])
              if config.simultaneous and len(scheduled) > 1 else ())
+    faults = {}
+    for f in config.unknown_faults:
+        faults.setdefault(fault_case(f), f)
     return DesignOfExperiments(n_units=size.surrogate_doe_units, intensities=size.surrogate_doe_intensities,
                                modes=modes, mission=config.mission, nominal=nominal, dispersion=config.dispersion,
                                seed=config.seed + 1, missions=size.surrogate_doe_missions, pairs=pairs,
-                               pair_intensities=size.surrogate_doe_pair_intensities if pairs else ())
+                               pair_intensities=size.surrogate_doe_pair_intensities if pairs else (),
+                               faults=tuple(faults.values()))
 
 
 def _with_coordinates(table: pd.DataFrame, models: list, nominal, dispersion) -> pd.DataFrame:

@@ -12,8 +12,12 @@ Two extensions serve the surrogate fidelity (:mod:`fuelhm_bench.envs.surrogate`)
 noise realisations (column ``replicate``), so that the flight-to-flight variation
 of a unit's response is observed; ``pairs`` adds flights with two modes at once
 (``mode`` ``"a+b"``, intensities in ``intensity`` and ``intensity_2``), so that
-the interaction of simultaneous modes is observed. With the defaults (one
-mission, no pair) the table is that of the published DOE, unchanged.
+the interaction of simultaneous modes is observed; ``faults`` adds, per unit and
+mission, one flight with each fault outside the seven modes
+(:class:`~fuelhm_bench.flights.schedule.UnknownFault`: the effect with its declared
+parameters, at full strength; ``mode`` :func:`fault_case`, ``intensity`` 1), so
+that the response to it is observed like a mode's. With the defaults (one
+mission, no pair, no fault) the table is that of the published DOE, unchanged.
 
 The ITL is *published knowledge*: it is computed on the nominal model the
 benchmark publishes (no hidden effects), with the scenario's mission and sensor.
@@ -36,6 +40,27 @@ from fuelhm_bench.physics.simulate import simulate
 from fuelhm_bench.taxonomy import MODE_IDS
 
 _STREAM_DOE_UNIT, _STREAM_DOE_MISSION, _STREAM_DOE_NOISE = 10, 11, 12
+
+#: Prefix of the ``mode`` of a DOE flight with a fault outside the seven modes (:func:`fault_case`).
+FAULT_PREFIX = "unknown:"
+
+
+def fault_case(fault) -> str:
+    """The ``mode`` label of a DOE flight with the fault outside the seven modes ``fault``.
+
+    ``"unknown:<effect>"``, followed by ``"@name=value,..."`` when the fault sets parameters
+    (values exact: ``repr`` of the float, without a ``+``, which separates the modes of a pair).
+    Two faults with the same effect and parameters share a label (the same physics), whatever
+    their probability and onsets.
+
+    Examples
+    --------
+    >>> from fuelhm_bench.flights.schedule import UnknownFault
+    >>> fault_case(UnknownFault("torque_motor_hysteresis", parameters=(("width_a", 0.0005),)))
+    'unknown:torque_motor_hysteresis@width_a=0.0005'
+    """
+    params = ",".join(f"{k}={repr(float(v)).replace('+', '')}" for k, v in fault.parameters)
+    return FAULT_PREFIX + fault.effect + (f"@{params}" if params else "")
 
 
 @dataclass(frozen=True)
@@ -65,6 +90,9 @@ class DesignOfExperiments:
         Pairs of modes flown together, each at every combination of ``pair_intensities``.
     pair_intensities : tuple of float, default=()
         Intensities of each mode of a pair, in (0, 1] (required when ``pairs`` is given).
+    faults : tuple of UnknownFault, default=()
+        Faults outside the seven modes, each flown at full strength (its effect with its
+        parameters) on every unit and mission, after the other cases (``mode`` :func:`fault_case`).
     """
 
     n_units: int = 8
@@ -77,6 +105,7 @@ class DesignOfExperiments:
     missions: int = 1
     pairs: tuple = ()
     pair_intensities: tuple = ()
+    faults: tuple = field(default=(), metadata={"key": "omit-default"})  # keys of older recipes kept
 
     def __post_init__(self) -> None:
         if not isinstance(self.n_units, int) or self.n_units < 1:
@@ -97,6 +126,14 @@ class DesignOfExperiments:
             raise range_error("DesignOfExperiments.pair_intensities", "a non-empty tuple of values in (0, 1] "
                               "when pairs are given", self.pair_intensities)
         object.__setattr__(self, "pairs", pairs)
+        faults = tuple(self.faults)
+        if any(not (hasattr(f, "effect") and hasattr(f, "parameters") and callable(getattr(f, "build", None)))
+               for f in faults):
+            raise range_error("DesignOfExperiments.faults", "a tuple of UnknownFault", self.faults)
+        labels = [fault_case(f) for f in faults]
+        if len(set(labels)) != len(labels):
+            raise range_error("DesignOfExperiments.faults", "faults with different effects or parameters", labels)
+        object.__setattr__(self, "faults", faults)
 
     @property
     def n_flights(self) -> int:
@@ -106,11 +143,12 @@ class DesignOfExperiments:
     def cases(self) -> list[tuple[str, float]]:
         """``(mode, intensity)`` of every flight of a unit on one mission, healthy first.
 
-        A pair's case is ``("a+b", (f_a, f_b))``.
+        A pair's case is ``("a+b", (f_a, f_b))``; a fault's ``(fault_case(fault), 1.0)``.
         """
         return ([("healthy", 0.0)] + [(m, float(f)) for m in self.modes for f in self.intensities]
                 + [(f"{a}+{b}", (float(fa), float(fb))) for a, b in self.pairs
-                   for fa in self.pair_intensities for fb in self.pair_intensities])
+                   for fa in self.pair_intensities for fb in self.pair_intensities]
+                + [(fault_case(f), 1.0) for f in self.faults])
 
 
 def run_doe(doe: DesignOfExperiments, *, batch_size: int | None = None, extraction=None,
@@ -154,6 +192,7 @@ def _doe_part(doe: DesignOfExperiments, start: int, stop: int, extraction) -> pd
     from fuelhm_bench.indicators import extract_table
 
     cases = doe.cases()
+    faults = {fault_case(f): f for f in doe.faults}
     per_block = len(cases)  # one unit on one mission
     chunk = []
     for block in range(start // per_block, (stop - 1) // per_block + 1):
@@ -166,6 +205,8 @@ def _doe_part(doe: DesignOfExperiments, start: int, stop: int, extraction) -> pd
             if start <= flight_id < stop:
                 if mode == "healthy":
                     model = unit
+                elif mode in faults:  # the effect with its parameters, at full strength
+                    model = unit.with_effect(faults[mode].build())
                 elif "+" in mode:
                     model = unit.degraded(dict(zip(mode.split("+"), f)))
                 else:

@@ -111,7 +111,9 @@ class ActuationLoopEnv(gym.Env):
     does; with ``fidelity="surrogate"`` they are drawn from a law learnt on
     physics flights of the scored fleet's model (a Gaussian unit effect,
     resampled flight-to-flight residuals with their invalid indicators, and the
-    per-unit, per-intensity responses of a design of experiments:
+    per-unit, per-intensity responses of a design of experiments, and for each of
+    the scenario's faults outside the seven modes its full-strength response from
+    design-of-experiments flights with that fault, added from the fault's onset:
     :class:`~fuelhm_bench.envs.surrogate.SurrogateModel`; inputs from
     :func:`~fuelhm_bench.datasets.cache.surrogate_knowledge`, cached), thousands of
     times faster.
@@ -300,7 +302,9 @@ class ActuationLoopEnv(gym.Env):
     * v3: a fault outside the seven modes enters the rewards (detectable from its onset,
       repaired by a correct maintenance, never an in-flight failure) and drawn units get the
       scenario's ``unknown_faults`` like the scored fleet's units (v2 rewarded those flights as
-      healthy); at surrogate fidelity a repaired unit keeps its manufacturing draws. Retired v2:
+      healthy); at surrogate fidelity a repaired unit keeps its manufacturing draws. Later in v3
+      (no change for arguments accepted before): the surrogate fidelity draws scenarios with
+      ``unknown_faults``, which it refused until then. Retired v2:
       ``gym.make("FuelHM/ActuationLoop-v2")`` raises ``DeprecatedEnv`` naming v3.
     * v2: the observation gains ``"extended"`` and ``"extended_valid"``: the eleven extended
       indicators (velocities at fixed currents, null scatter, rest fraction, and the issue-11
@@ -391,10 +395,7 @@ class ActuationLoopEnv(gym.Env):
         self._c_false, self._c_repair = float(costs.false_alarm_kusd), float(costs.repair_kusd)
         self._c_undetected, self._c_failure = float(costs.undetected_flight_kusd), float(costs.failure_kusd)
         self.surrogate = None
-        if fidelity == "surrogate" and sc.unknown_faults:
-            raise ParameterError(f"{owner}: scenario {sc.id} has faults outside the seven modes (unknown_faults: "
-                                 f"{', '.join(u.effect for u in sc.unknown_faults)}), which the surrogate cannot "
-                                 f"draw (it knows the seven modes' responses only). Use fidelity='physics'.")
+        self._fault_columns = None
         if fidelity == "surrogate":
             if knowledge is None:
                 knowledge = surrogate_knowledge(sc, flight_minutes=self.flight_minutes, size=size,
@@ -413,6 +414,20 @@ class ActuationLoopEnv(gym.Env):
                                       f"{lacking}. Build its knowledge from indicator tables with those columns "
                                       f"(fuelhm_bench.datasets.cache.surrogate_knowledge does).")
             self._ext_columns = np.array([self.surrogate.names.index(n) for n in EXTENDED_INDICATOR_NAMES])
+            if config.unknown_faults:  # each fault outside the seven modes: its learnt full-strength response
+                from fuelhm_bench.datasets.doe import fault_case
+
+                learnt = {f: j for j, f in enumerate(self.surrogate.faults) if self.surrogate.fault_learnt[j]}
+                labels = [fault_case(u) for u in config.unknown_faults]
+                missing = [label for label in labels if label not in learnt]
+                if missing:
+                    raise ParameterError(
+                        f"{owner}: scenario {sc.id} has the fault(s) outside the seven modes {missing}, whose "
+                        f"response the surrogate was not learnt for (its design of experiments did not fly them; "
+                        f"it learnt {list(learnt)}). Build its knowledge with "
+                        f"fuelhm_bench.datasets.cache.surrogate_knowledge (which flies every unknown fault of the "
+                        f"scenario) or use fidelity='physics'.")
+                self._fault_columns = np.array([learnt[label] for label in labels], dtype=np.intp)
 
         obs = {"indicators": spaces.Box(_LOW, _HIGH, (len(INDICATOR_NAMES),), np.float32),
                "valid": spaces.MultiBinary(len(INDICATOR_NAMES)),
@@ -563,7 +578,13 @@ class ActuationLoopEnv(gym.Env):
                 self._model if self._model is not None else unit_rng(self._seed, self._slot), config.nominal,
                 config.dispersion)
             self._parts = self.surrogate.draw_parts(rng, n, coordinates)
-            self._fill_surrogate(0, intensity)
+            self._faults = None
+            if self._fault_columns is not None:  # presence of the unit's unknown fault, from its onset on
+                self._faults = np.zeros((n, len(self.surrogate.faults)), dtype=bool)
+                if schedule.unknown is not None:
+                    column = self._fault_columns[config.unknown_faults.index(schedule.unknown)]
+                    self._faults[schedule.unknown_onset:, column] = True
+            self._fill_surrogate(0, intensity, self._faults)
         elif self._model is None:
             from fuelhm_bench.physics.model import manufacture
 
@@ -643,12 +664,13 @@ class ActuationLoopEnv(gym.Env):
             obs["raw"] = np.clip(raw, low, high).astype(np.float32)
         return obs
 
-    def _fill_surrogate(self, start: int, intensity: np.ndarray) -> None:
-        """Surrogate observations of flights ``start ..`` for these intensities (the unit's draws are kept)."""
+    def _fill_surrogate(self, start: int, intensity: np.ndarray, faults: np.ndarray | None = None) -> None:
+        """Surrogate observations of flights ``start ..`` for these intensities and unknown faults present
+        (the unit's draws are kept)."""
         parts = self._parts
         if start:
             parts = self.surrogate.tail(parts, start)
-        values, valid = self.surrogate.degrade(parts, intensity)
+        values, valid = self.surrogate.degrade(parts, intensity, faults)
         tables = {}
         for key, columns, low, high in (("indicators", self._columns, _LOW, _HIGH),
                                         ("extended", self._ext_columns, _XLOW, _XHIGH)):
@@ -790,7 +812,10 @@ class ActuationLoopEnv(gym.Env):
         """Remove the repaired modes from flight ``t + 1`` on (surrogate: recompute the remaining table)."""
         self._active &= ~repaired
         if self.surrogate is not None and t + 1 < self.n_flights:
-            self._fill_surrogate(t + 1, self._intensity[t + 1:] * self._mask(self._active))
+            faults = self._faults
+            if faults is not None:
+                faults = faults[t + 1:] & bool(self._active & _UNKNOWN_BIT)
+            self._fill_surrogate(t + 1, self._intensity[t + 1:] * self._mask(self._active), faults)
 
     def episode_truth(self) -> dict:
         """Ground truth of the flights of the current episode decided so far.

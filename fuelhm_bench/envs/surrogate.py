@@ -437,6 +437,23 @@ class SurrogateModel:
     interactions : ndarray of shape (k, len(pairs), g + 1, g + 1, p) or None
         Per DOE unit, what two modes together add to the sum of their responses, at
         ``(0, pair_knots...)`` squared (0 on the axes); bilinear between the knots, held beyond.
+    faults : tuple of str, default=()
+        Faults outside the seven modes learnt from the DOE (their ``mode`` labels,
+        :func:`~fuelhm_bench.datasets.doe.fault_case`), in the order of the columns of
+        ``faults`` in :meth:`degrade`.
+    fault_mean : ndarray of shape (f, p) or None
+        Response to each fault (at full strength) of a unit at ``z = 0``.
+    fault_map : ndarray of shape (f, p, c) or None
+        Response to each fault per unit coordinate.
+    fault_responses : ndarray of shape (k, f, p) or None
+        What the coordinates do not explain of each DOE unit's response to each fault.
+    fault_invalid : ndarray of shape (k, f, p), bool, or None
+        Indicators the fault made invalid on that DOE unit's flight.
+    fault_flight : ndarray of shape (s, f, p) or None
+        Pool of flight-to-flight deviations of a fault response from its DOE unit's mean
+        response (as ``response_flight``).
+    fault_learnt : ndarray of shape (f,), bool, or None
+        Faults the DOE flew (None: all); the presence of another is refused.
     fit_info : dict
         Sizes of the physics sample (``healthy_units``, ``healthy_flights``,
         ``residual_rows``, ``doe_units``) and unit-bootstrap standard errors
@@ -461,6 +478,13 @@ class SurrogateModel:
     pairs: tuple = ()
     pair_knots: np.ndarray | None = None
     interactions: np.ndarray | None = None
+    faults: tuple = ()
+    fault_mean: np.ndarray | None = None
+    fault_map: np.ndarray | None = None
+    fault_responses: np.ndarray | None = None
+    fault_invalid: np.ndarray | None = None
+    fault_flight: np.ndarray | None = None
+    fault_learnt: np.ndarray | None = None
     fit_info: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -493,6 +517,17 @@ class SurrogateModel:
         if self.interactions is None:
             object.__setattr__(self, "interactions", np.zeros((max(k, 0), len(pairs), g + 1, g + 1, p)))
         s_rows = np.shape(self.response_flight)[0] if np.ndim(self.response_flight) == 4 else -1
+        faults = tuple(map(str, self.faults))
+        object.__setattr__(self, "faults", faults)
+        nf = len(faults)
+        for name, shape, dtype in (("fault_mean", (nf, p), np.float64), ("fault_map", (nf, p, c), np.float64),
+                                   ("fault_responses", (max(k, 0), nf, p), np.float64),
+                                   ("fault_invalid", (max(k, 0), nf, p), bool),
+                                   ("fault_flight", (1, nf, p), np.float64), ("fault_learnt", (nf,), bool)):
+            if getattr(self, name) is None or not nf:  # (no fault: empty arrays that follow the other shapes)
+                object.__setattr__(self, name, np.ones(shape, dtype) if name == "fault_learnt"
+                                   else np.zeros(shape, dtype))
+        sf_rows = np.shape(self.fault_flight)[0] if np.ndim(self.fault_flight) == 3 else -1
         if self.response_mean is None and k >= 1 and np.shape(self.responses)[1:] == (m, q + 1, p):
             resp = np.asarray(self.responses, dtype=np.float64)
             object.__setattr__(self, "response_mean", resp.mean(axis=0))
@@ -501,9 +536,12 @@ class SurrogateModel:
                   "knots": (q,), "responses": (k, m, q + 1, p), "response_invalid": (k, m, q + 1, p),
                   "coordinate_map": (p, c), "response_mean": (m, q + 1, p), "response_map": (m, q + 1, p, c),
                   "learnt": (m,), "response_flight": (s_rows, m, q + 1, p), "pair_knots": (g,),
-                  "interactions": (k, len(pairs), g + 1, g + 1, p)}
+                  "interactions": (k, len(pairs), g + 1, g + 1, p), "fault_mean": (nf, p), "fault_map": (nf, p, c),
+                  "fault_responses": (k, nf, p), "fault_invalid": (k, nf, p), "fault_flight": (sf_rows, nf, p),
+                  "fault_learnt": (nf,)}
         for name, shape in shapes.items():
-            dtype = bool if name in ("residual_valid", "response_invalid", "learnt") else np.float64
+            dtype = (bool if name in ("residual_valid", "response_invalid", "learnt", "fault_invalid", "fault_learnt")
+                     else np.float64)
             value = getattr(self, name)
             arr = np.array(value if value is not None else np.nan, dtype=dtype, copy=True)
             if arr.shape != shape or min(shape, default=1) < 0 or not np.all(np.isfinite(arr)):
@@ -526,6 +564,7 @@ class SurrogateModel:
         object.__setattr__(self, "_lossy", self.response_invalid.any(axis=(2, 3)))
         object.__setattr__(self, "_flight_pool", bool(np.any(self.response_flight)))
         object.__setattr__(self, "_pair_index", tuple((modes.index(a), modes.index(b)) for a, b in pairs))
+        object.__setattr__(self, "_fault_pool", bool(np.any(self.fault_flight)))
 
     @classmethod
     def from_knowledge(cls, knowledge) -> SurrogateModel:
@@ -601,7 +640,11 @@ class SurrogateModel:
         :func:`~fuelhm_bench.physics.model.manufacture` draws them), and only
         when the model has a pool of flight-to-flight response deviations
         (:attr:`response_flight`), ``random((n_flights, len(modes)))`` (the
-        deviation each flight draws per mode).
+        deviation each flight draws per mode); then, only when the model learnt
+        faults outside the seven modes (:attr:`faults`), ``random(len(faults))``
+        (the DOE unit drawn per fault) and, with a pool of their deviations
+        (:attr:`fault_flight`), ``random((n_flights, len(faults)))``. A model
+        without faults draws exactly what it drew before faults existed.
 
         Returns
         -------
@@ -610,8 +653,9 @@ class SurrogateModel:
             Table I and any extended indicator), invalid ones arbitrary;
             ``valid`` (n_flights, p), bool; ``doe_units`` (m,); ``uniforms``
             (n_flights, m); ``coordinates`` (c,); ``deviations`` (n_flights, m),
-            rows of :attr:`response_flight`. The per-flight entries are those
-            :meth:`tail` slices.
+            rows of :attr:`response_flight`; with faults, ``fault_units`` (f,) and
+            ``fault_deviations`` (n_flights, f), rows of :attr:`fault_flight`. The
+            per-flight entries are those :meth:`tail` slices.
         """
         m, c = len(self.modes), len(self.coordinates)
         z = rng.standard_normal(len(self.names))
@@ -630,10 +674,16 @@ class SurrogateModel:
             deviations = (rng.random((n_flights, m)) * self.response_flight.shape[0]).astype(np.intp)
         else:
             deviations = np.zeros((n_flights, m), dtype=np.intp)
-        return {"healthy": healthy, "valid": self.residual_valid[rows], "doe_units": doe_units,
-                "uniforms": uniforms, "coordinates": coordinates, "deviations": deviations}
+        parts = {"healthy": healthy, "valid": self.residual_valid[rows], "doe_units": doe_units,
+                 "uniforms": uniforms, "coordinates": coordinates, "deviations": deviations}
+        if self.faults:
+            nf = len(self.faults)
+            parts["fault_units"] = (rng.random(nf) * self.fault_responses.shape[0]).astype(np.intp)
+            parts["fault_deviations"] = ((rng.random((n_flights, nf)) * self.fault_flight.shape[0]).astype(np.intp)
+                                         if self._fault_pool else np.zeros((n_flights, nf), dtype=np.intp))
+        return parts
 
-    _PER_FLIGHT = ("healthy", "valid", "uniforms", "deviations")
+    _PER_FLIGHT = ("healthy", "valid", "uniforms", "deviations", "fault_deviations")
 
     def tail(self, parts: dict, start: int) -> dict:
         """The parts of a unit's flights ``start ..`` (:meth:`draw_parts`; per-unit entries kept)."""
@@ -644,8 +694,9 @@ class SurrogateModel:
         return (self.response_mean[mode] + self.response_map[mode] @ coordinates
                 + self.responses[doe_unit, mode])
 
-    def degrade(self, parts: dict, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Add the mode responses to a unit's healthy flights (:meth:`draw_parts`).
+    def degrade(self, parts: dict, intensities: np.ndarray, faults: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Add the mode responses (and fault responses) to a unit's healthy flights (:meth:`draw_parts`).
 
         Parameters
         ----------
@@ -653,6 +704,10 @@ class SurrogateModel:
             From :meth:`draw_parts` (any suffix of its flights may be passed by slicing
             ``healthy``, ``valid`` and ``uniforms`` alike). Not modified.
         intensities : ndarray of shape (n, len(modes))
+        faults : ndarray of shape (n, len(faults)) or None, default=None
+            Presence (0 or 1, bool) of each fault outside the seven modes (:attr:`faults`) on
+            each flight: a present fault adds its full-strength response (the DOE unit's own,
+            with its flight-to-flight deviation and invalid indicators). None: none present.
 
         Returns
         -------
@@ -663,7 +718,9 @@ class SurrogateModel:
         Raises
         ------
         ParameterError
-            A positive intensity of a mode the surrogate was not learnt for (:attr:`learnt`).
+            A positive intensity of a mode the surrogate was not learnt for (:attr:`learnt`), a
+            fault it was not learnt for (:attr:`fault_learnt`), or ``faults`` of the wrong shape or
+            not 0/1.
         """
         out = parts["healthy"]
         valid = parts["valid"]
@@ -700,7 +757,35 @@ class SurrogateModel:
                     nearest = np.minimum(i0 + (parts["uniforms"][:, j] < w), last)
                     valid = valid & ~self.response_invalid[d, j, nearest]
             out = self._interact(out, intensities, parts["doe_units"], set(active.tolist()))
+        if faults is not None:
+            out, valid = self._add_faults(out, valid, parts, faults, coordinates)
         return np.where(valid, out, 0.0), valid
+
+    def _add_faults(self, out, valid, parts, faults, coordinates):
+        """Add the full-strength responses of the faults present on each flight (see :meth:`degrade`)."""
+        from fuelhm_bench.errors import ParameterError
+
+        present = np.asarray(faults)
+        if present.shape != (len(out), len(self.faults)) or not np.isin(present, (0, 1)).all():
+            raise ParameterError(f"The 'faults' parameter of SurrogateModel.degrade must be an array of 0/1 of shape "
+                                 f"{(len(out), len(self.faults))} (flights, faults {list(self.faults)}). Got "
+                                 f"{present!r:.80} instead.")
+        present = present.astype(bool)
+        on = np.flatnonzero(present.any(axis=0))
+        unlearnt = [self.faults[j] for j in on if not self.fault_learnt[j]]
+        if unlearnt:
+            raise ParameterError(f"The surrogate was not learnt for the fault(s) outside the seven modes {unlearnt} "
+                                 f"(its design of experiments did not fly them); use the physics fidelity for "
+                                 f"them.")
+        for j in on:
+            d = parts["fault_units"][j]
+            response = self.fault_mean[j] + self.fault_map[j] @ coordinates + self.fault_responses[d, j]
+            if self._fault_pool:  # this flight's deviation from the DOE unit's mean response
+                response = response + self.fault_flight[parts["fault_deviations"][:, j], j]
+            rows = present[:, j][:, None]
+            out = out + np.where(rows, response, 0.0)
+            valid = valid & ~(rows & self.fault_invalid[d, j])
+        return out, valid
 
     def _interact(self, out: np.ndarray, intensities: np.ndarray, doe_units: np.ndarray, active: set) -> np.ndarray:
         """Add the interactions of the pairs of active modes (bilinear on the pair grid, held beyond its last knot)."""
@@ -772,8 +857,28 @@ def _fit_healthy(x, valid, units, z, penalty):
     return mean, coef_map, between, resid, rvalid, c, lam
 
 
+def _fault_responses(doe: pd.DataFrame, names: tuple[str, ...], faults: tuple[str, ...], coords: tuple[str, ...],
+                     penalty: float):
+    """Learnt flags, mean responses, coordinate maps, per-DOE-unit residuals, invalidity and flight pool of faults.
+
+    A fault outside the seven modes is flown at full strength only: it is learnt like a mode
+    with the one DOE intensity of its flights (:func:`_responses` on its label), and its
+    response is the one at that intensity (the last knot), held whatever the flight.
+    """
+    (knots, learnt, mean, coef_map, residual, invalid, penalties, flight,
+     *_) = _responses(doe, names, faults, coords, penalty)
+    if not len(knots):  # the DOE flew none of them
+        k, p, c = residual.shape[0], len(names), len(coords)
+        return (np.zeros(len(faults), dtype=bool), np.zeros((len(faults), p)), np.zeros((len(faults), p, c)),
+                np.zeros((k, len(faults), p)), np.zeros((k, len(faults), p), dtype=bool),
+                np.zeros((1, len(faults), p)), penalties)
+    return (learnt, mean[:, -1], coef_map[:, -1], residual[:, :, -1], invalid[:, :, -1], flight[:, :, -1],
+            penalties)
+
+
 def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | None = None,
-                  bootstrap: int = 50, seed: int = 0, penalty: float | None = None) -> SurrogateModel:
+                  bootstrap: int = 50, seed: int = 0, penalty: float | None = None,
+                  faults: tuple | None = None) -> SurrogateModel:
     """Learn a :class:`SurrogateModel` from physics indicator tables (a pure function of the tables).
 
     Parameters
@@ -801,6 +906,11 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
         Ridge penalty of the regressions on the unit coordinates (per unit of squared
         standardised coordinate; the intercept is not penalised), >= 0; None: chosen per
         regression by generalised cross-validation.
+    faults : tuple of str or None, default=None
+        Faults outside the seven modes to learn, by their DOE ``mode`` label
+        (:func:`~fuelhm_bench.datasets.doe.fault_case`); None: every such label of ``doe``
+        (prefix ``"unknown:"``), in order of appearance. A fault the DOE did not fly is not
+        learnt (its presence is refused).
 
     Returns
     -------
@@ -842,12 +952,20 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
      interactions) = _responses(doe, names, modes, coords, penalty)
     if resp.shape[0] < 1:
         raise DataFormatError("The 'doe' table of fit_surrogate has no unit with a healthy flight.")
+    if faults is None:
+        from fuelhm_bench.datasets.doe import FAULT_PREFIX
+
+        faults = tuple(str(md) for md in pd.unique(doe["mode"].astype(str)) if str(md).startswith(FAULT_PREFIX))
+    faults = tuple(map(str, faults))
+    fault_parts = _fault_responses(doe, names, faults, coords, penalty) if faults else (None,) * 7
     info = {"healthy_units": int(len(labels)), "healthy_flights": int(len(healthy)),
             "residual_rows": int(len(resid)), "doe_units": int(resp.shape[0]),
             "doe_intensities": knots.tolist(), "coordinates": len(coords), "penalty_healthy": h_pen,
             "doe_missions": int(flight.shape[0] // max(resp.shape[0], 1)) if np.any(flight) else 1,
             "doe_pairs": [list(pr) for pr in pairs], "doe_pair_intensities": pair_knots.tolist(),
             "penalty_responses": dict(zip(modes, r_pen))}
+    if faults:
+        info["penalty_faults"] = dict(zip(faults, fault_parts[6]))
     if bootstrap and len(labels) >= 3:
         rng = np.random.default_rng(seed)
         stds, shares = [], []
@@ -872,4 +990,6 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
                           residual_valid=rvalid, knots=knots, responses=resp, response_invalid=invalid,
                           coordinates=coords, coordinate_map=coef_map, response_mean=r_mean, response_map=r_map,
                           learnt=learnt, response_flight=flight, pairs=pairs, pair_knots=pair_knots,
-                          interactions=interactions, fit_info=info)
+                          interactions=interactions, faults=faults, fault_learnt=fault_parts[0],
+                          fault_mean=fault_parts[1], fault_map=fault_parts[2], fault_responses=fault_parts[3],
+                          fault_invalid=fault_parts[4], fault_flight=fault_parts[5], fit_info=info)
