@@ -58,6 +58,16 @@ _HIGH = np.array([INDICATOR_BOUNDS[n][1] for n in INDICATOR_NAMES], dtype=np.flo
 _XLOW = np.array([EXTENDED_INDICATOR_BOUNDS[n][0] for n in EXTENDED_INDICATOR_NAMES], dtype=np.float32)
 _XHIGH = np.array([EXTENDED_INDICATOR_BOUNDS[n][1] for n in EXTENDED_INDICATOR_NAMES], dtype=np.float32)
 _N_EXT = len(EXTENDED_INDICATOR_NAMES)
+_N_IND = len(INDICATOR_NAMES)
+_OBS_LOW, _OBS_HIGH = np.concatenate([_LOW, _XLOW]), np.concatenate([_HIGH, _XHIGH])  # the ten, then the extended
+
+
+def _ufunc_clip():
+    """The ufunc ``numpy.clip`` ends in (numpy >= 2), else ``numpy.clip``: the same values without its Python layers."""
+    return getattr(getattr(getattr(np, "_core", None), "umath", None), "clip", np.clip)
+
+
+_clip = _ufunc_clip()
 _ARGUMENTS = ("scenario", "fidelity", "maintenance", "drifted", "flight_minutes", "raw", "raw_samples",
               "knowledge", "knowledge_size", "cache_dir", "render_mode")
 _OPTIONS = ("unit", "evaluation", "raw_flight")
@@ -87,9 +97,12 @@ def _observation_arrays(rows) -> dict[str, np.ndarray]:
     return out
 
 
-def _bitmask(flags: np.ndarray) -> list[int]:
-    """Row-wise bitmask (bit j = column j) of a boolean matrix, as Python ints."""
-    return [int(v) for v in (flags.astype(np.int64) * _BITS).sum(axis=1)]
+def _bitmask(flags: np.ndarray, extra: np.ndarray | None = None) -> list[int]:
+    """Row-wise bitmask (bit j = column j) of a boolean matrix, or-ed with ``extra`` (int64 per row), as Python ints."""
+    bits = flags.astype(np.int64) @ _BITS
+    if extra is not None:
+        bits |= extra
+    return bits.tolist()
 
 
 class ActuationLoopEnv(gym.Env):
@@ -414,6 +427,7 @@ class ActuationLoopEnv(gym.Env):
                                       f"{lacking}. Build its knowledge from indicator tables with those columns "
                                       f"(fuelhm_bench.datasets.cache.surrogate_knowledge does).")
             self._ext_columns = np.array([self.surrogate.names.index(n) for n in EXTENDED_INDICATOR_NAMES])
+            self._obs_columns = np.concatenate([self._columns, self._ext_columns])
             if config.unknown_faults:  # each fault outside the seven modes: its learnt full-strength response
                 from fuelhm_bench.datasets.doe import fault_case
 
@@ -563,11 +577,10 @@ class ActuationLoopEnv(gym.Env):
         self._intensity, self._max, self._onset = intensity, max_intensity, onset
         # A fault outside the seven modes acts at full strength from its onset: present and detectable
         # from then on; it has no failure law, so it never fails in flight.
-        unknown = (np.where(flights >= schedule.unknown_onset, _UNKNOWN_BIT, 0) if schedule.unknown is not None
-                   else np.zeros(n, dtype=np.int64))
-        self._present_bits = [b | int(u) for b, u in zip(_bitmask(present), unknown)]
-        self._det_bits = [b | int(u) for b, u in
-                          zip(_bitmask(present & (intensity >= costs.detectable_fraction * max_intensity)), unknown)]
+        unknown = (np.where(flights >= schedule.unknown_onset, _UNKNOWN_BIT, 0).astype(np.int64)
+                   if schedule.unknown is not None else None)
+        self._present_bits = _bitmask(present, unknown)
+        self._det_bits = _bitmask(present & (intensity >= costs.detectable_fraction * max_intensity), unknown)
         self._fail_bits = _bitmask(present & (intensity >= costs.failure_fraction * max_intensity))
         self._active, self._failed = _ALL, 0
         self._active_log, self._fail_log, self._repair_log, self._cost_log = [], [], [], []
@@ -671,20 +684,33 @@ class ActuationLoopEnv(gym.Env):
         if start:
             parts = self.surrogate.tail(parts, start)
         values, valid = self.surrogate.degrade(parts, intensity, faults)
-        tables = {}
-        for key, columns, low, high in (("indicators", self._columns, _LOW, _HIGH),
-                                        ("extended", self._ext_columns, _XLOW, _XHIGH)):
-            ok = valid[:, columns] & np.isfinite(values[:, columns])
-            tables[key] = np.clip(np.where(ok, values[:, columns], 0.0), low, high).astype(np.float32)
-            tables["valid" if key == "indicators" else "extended_valid"] = ok.astype(np.int8)
+        # the ten and the extended indicators in one pass (values 0 where invalid, clipped to the bounds)
+        columns = self._obs_columns
+        values = values[:, columns]
+        ok = valid[:, columns]
+        ok &= np.isfinite(values)
+        table = _clip(np.where(ok, values, 0.0), _OBS_LOW, _OBS_HIGH).astype(np.float32)
+        flags = ok.astype(np.int8)
         if start:
-            for key, table in tables.items():
-                self._tables[key][start:] = table
+            self._table[start:] = table
+            self._flags[start:] = flags
         else:
-            self._tables = tables
+            self._table, self._flags = table, flags
 
-    def _surrogate_observation(self, t: int) -> dict:
-        return {key: table[t].copy() for key, table in self._tables.items()}
+    @property
+    def _tables(self) -> dict:
+        """The episode's surrogate observations, per key (views of its rows)."""
+        n = len(INDICATOR_NAMES)
+        return {"indicators": self._table[:, :n], "valid": self._flags[:, :n],
+                "extended": self._table[:, n:], "extended_valid": self._flags[:, n:]}
+
+    def _surrogate_observation(self, t: int, copy: bool = False) -> dict:
+        """Flight ``t``'s observation: views of the episode's rows (a row is never written once observed: a
+        repair rewrites later flights only, a reset makes new tables), copies with ``copy``."""
+        table, flags, n = self._table, self._flags, _N_IND
+        obs = {"indicators": table[t, :n], "valid": flags[t, :n], "extended": table[t, n:],
+               "extended_valid": flags[t, n:]}
+        return {key: value.copy() for key, value in obs.items()} if copy else obs
 
     def _mask(self, bits: int) -> np.ndarray:
         return ((bits & _BITS) != 0).astype(np.float64)
@@ -721,8 +747,10 @@ class ActuationLoopEnv(gym.Env):
         g = guilt if type(guilt) is np.ndarray else np.asarray(guilt)
         if g.shape != (_N_MODES,) or g.dtype.kind not in "biuf":
             raise self._action_error(f"guilt of shape {g.shape} and dtype {g.dtype}")
-        if not all(0.0 <= v <= 1.0 for v in g.tolist()):  # False for NaN; faster than two reductions on 7 numbers
-            raise self._action_error(f"guilt={g.tolist()} (entries outside [0, 1] or NaN)")
+        values = g.tolist()  # on 7 numbers, builtins beat reductions; a NaN fails the sum's self-equality
+        total = sum(values)
+        if not (0.0 <= min(values) and max(values) <= 1.0 and total == total):
+            raise self._action_error(f"guilt={values} (entries outside [0, 1] or NaN)")
         return value == 1
 
     def step(self, action):
@@ -783,8 +811,8 @@ class ActuationLoopEnv(gym.Env):
         reward = -cost if cost else 0.0
         if t == self.n_flights:
             self._t = -1
-            if self.surrogate is not None:
-                obs = self._surrogate_observation(t - 1)
+            if self.surrogate is not None:  # (shown a second time: a copy, whatever the agent did to the first)
+                obs = self._surrogate_observation(t - 1, copy=True)
             else:
                 obs = {k: v.copy() for k, v in self._last.items()}
             info = {"flight_index": t - 1, "episode_truth": self._episode_truth()}
@@ -837,18 +865,17 @@ class ActuationLoopEnv(gym.Env):
 
     def _episode_truth(self) -> dict:
         n = len(self._cost_log)
-        active = np.array(self._active_log[:n], dtype=np.int64).reshape(n, 1)
-        flown = self._intensity[:n] * ((active & _BITS) != 0)
+        active = np.array(self._active_log[:n], dtype=np.int64)
+        flown = self._intensity[:n] * ((active[:, None] & _BITS) != 0)
         return {
             "unit_id": self._unit_id,
             "flight_index": np.arange(n, dtype=np.int64),
             "intensity": flown,
             "max_intensity": self._max.copy(),
             "onset": self._onset.copy(),
-            "detectable": np.array([bool(d & a) for d, a in zip(self._det_bits[:n], self._active_log[:n])],
-                                   dtype=bool),
-            "failure": np.array([f != 0 for f in self._fail_log]),
-            "repaired": np.array([r != 0 for r in self._repair_log]),
+            "detectable": (np.array(self._det_bits[:n], dtype=np.int64) & active) != 0,
+            "failure": np.array(self._fail_log, dtype=np.int64) != 0 if n else np.array([]),
+            "repaired": np.array(self._repair_log, dtype=np.int64) != 0 if n else np.array([]),
             "cost_kusd": np.array(self._cost_log, dtype=np.float64),
             "unknown_fault": "" if self._schedule.unknown is None else self._schedule.unknown.effect,
             "unknown_onset": int(self._schedule.unknown_onset),

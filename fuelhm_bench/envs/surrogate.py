@@ -565,6 +565,9 @@ class SurrogateModel:
         object.__setattr__(self, "_flight_pool", bool(np.any(self.response_flight)))
         object.__setattr__(self, "_pair_index", tuple((modes.index(a), modes.index(b)) for a, b in pairs))
         object.__setattr__(self, "_fault_pool", bool(np.any(self.fault_flight)))
+        object.__setattr__(self, "_dgrid", np.diff(grid))
+        object.__setattr__(self, "_all_learnt", bool(self.learnt.all()))
+        object.__setattr__(self, "_plans", {})  # unit_coordinates' lookup per dispersion
 
     @classmethod
     def from_knowledge(cls, knowledge) -> SurrogateModel:
@@ -582,14 +585,20 @@ class SurrogateModel:
         if isinstance(unit, np.random.Generator):
             if float(dispersion.scale) == 0.0:
                 return np.zeros(len(self.coordinates))
-            order = [p for p, _ in dispersion.relative] + [p for p, _ in dispersion.additive]
-            z = dict(zip(order, manufacturing_draws(unit, dispersion)))
-            stds = dict(dispersion.relative) | dict(dispersion.additive)
-            missing = [c for c in self.coordinates if c not in z]
-            if missing:
-                raise DataFormatError(f"The surrogate's unit coordinates {missing} are not dispersed parameters of "
-                                      f"this fleet (dispersed: {order}).")
-            return np.array([z[c] if stds[c] else 0.0 for c in self.coordinates])
+            plan = self._plans.get(dispersion)
+            if plan is None:  # where each coordinate is among the draws, and whether it is dispersed at all
+                order = [p for p, _ in dispersion.relative] + [p for p, _ in dispersion.additive]
+                where = {p: i for i, p in enumerate(order)}
+                stds = dict(dispersion.relative) | dict(dispersion.additive)
+                missing = [c for c in self.coordinates if c not in where]
+                if missing:
+                    raise DataFormatError(f"The surrogate's unit coordinates {missing} are not dispersed parameters "
+                                          f"of this fleet (dispersed: {order}).")
+                plan = (np.array([where[c] for c in self.coordinates], dtype=np.intp),
+                        np.array([bool(stds[c]) for c in self.coordinates], dtype=bool))
+                self._plans[dispersion] = plan
+            index, dispersed = plan
+            return np.where(dispersed, manufacturing_draws(unit, dispersion)[index], 0.0)
         return dispersion_coordinates(unit, nominal, dispersion, self.coordinates)
 
     def columns(self, names) -> np.ndarray:
@@ -663,7 +672,7 @@ class SurrogateModel:
         if coordinates is None:
             coordinates = np.clip(rng.standard_normal(c), -3.0, 3.0) if c else np.zeros(0)
         coordinates = np.asarray(coordinates, dtype=np.float64)
-        if coordinates.shape != (c,) or not np.all(np.isfinite(coordinates)):
+        if coordinates.shape != (c,) or not np.isfinite(coordinates).all():
             raise DataFormatError(f"The 'coordinates' of SurrogateModel.draw_parts must be {c} finite numbers (one "
                                   f"per coordinate {list(self.coordinates)}). Got {coordinates!r:.80} instead.")
         rows = (u[:n_flights] * len(self.residuals)).astype(np.intp)
@@ -724,12 +733,15 @@ class SurrogateModel:
         """
         out = parts["healthy"]
         valid = parts["valid"]
-        coordinates = parts.get("coordinates", np.zeros(len(self.coordinates)))
-        grid, lossy = self._grid, self._lossy
+        coordinates = parts.get("coordinates")
+        if coordinates is None:
+            coordinates = np.zeros(len(self.coordinates))
+        grid, lossy, dgrid = self._grid, self._lossy, self._dgrid
         last = len(grid) - 1
         intensities = np.asarray(intensities, dtype=np.float64)
-        active = np.flatnonzero(intensities.max(axis=0) > 0) if intensities.size else np.zeros(0, dtype=np.intp)
-        unlearnt = [self.modes[j] for j in active if not self.learnt[j]]
+        active = ((intensities.max(axis=0) > 0).nonzero()[0] if intensities.size
+                  else np.zeros(0, dtype=np.intp))
+        unlearnt = [] if self._all_learnt else [self.modes[j] for j in active if not self.learnt[j]]
         if unlearnt:
             from fuelhm_bench.errors import ParameterError
 
@@ -737,23 +749,25 @@ class SurrogateModel:
                                  f"experiments flew only {[m for m, ok in zip(self.modes, self.learnt) if ok]}); "
                                  f"use the physics fidelity for them.")
         if last:
-            for j in active:
+            pool_on = self._flight_pool
+            for j in active.tolist():
                 f = intensities[:, j]
                 d = parts["doe_units"][j]
                 curve = self.response_curve(j, d, coordinates)
-                slopes = np.diff(curve, axis=0) / np.diff(grid)[:, None]
+                slopes = (curve[1:] - curve[:-1]) / dgrid[:, None]  # np.diff, without its Python layer
                 # segment [grid[i0], grid[i0 + 1]]; beyond the largest knot the last segment continues
-                i0 = np.searchsorted(grid, f, side="right") - 1
+                i0 = grid.searchsorted(f, side="right") - 1
                 np.minimum(i0, last - 1, out=i0)
                 np.maximum(i0, 0, out=i0)
-                out = out + curve[i0] + (f - grid[i0])[:, None] * slopes[i0]
-                if self._flight_pool:  # this flight's deviation from the unit's mean response
+                offset = f - grid[i0]
+                out = out + curve[i0] + offset[:, None] * slopes[i0]
+                if pool_on or lossy[d, j]:
+                    w = offset / dgrid[i0]  # = (f - grid[i0]) / (grid[i0 + 1] - grid[i0])
+                if pool_on:  # this flight's deviation from the unit's mean response
                     pool, pick = self.response_flight[:, j], parts["deviations"][:, j]
                     lo, hi = pool[pick, i0], pool[pick, i0 + 1]  # (n, p) each
-                    w = ((f - grid[i0]) / (grid[i0 + 1] - grid[i0]))[:, None]
-                    out = out + lo + w * (hi - lo)
+                    out = out + lo + w[:, None] * (hi - lo)
                 if lossy[d, j]:
-                    w = (f - grid[i0]) / (grid[i0 + 1] - grid[i0])
                     nearest = np.minimum(i0 + (parts["uniforms"][:, j] < w), last)
                     valid = valid & ~self.response_invalid[d, j, nearest]
             out = self._interact(out, intensities, parts["doe_units"], set(active.tolist()))
