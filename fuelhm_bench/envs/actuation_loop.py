@@ -428,6 +428,8 @@ class ActuationLoopEnv(gym.Env):
                                       f"(fuelhm_bench.datasets.cache.surrogate_knowledge does).")
             self._ext_columns = np.array([self.surrogate.names.index(n) for n in EXTENDED_INDICATOR_NAMES])
             self._obs_columns = np.concatenate([self._columns, self._ext_columns])
+            if np.array_equal(self._obs_columns, np.arange(len(self.surrogate.names))):
+                self._obs_columns = None
             if config.unknown_faults:  # each fault outside the seven modes: its learnt full-strength response
                 from fuelhm_bench.datasets.doe import fault_case
 
@@ -579,9 +581,14 @@ class ActuationLoopEnv(gym.Env):
         # from then on; it has no failure law, so it never fails in flight.
         unknown = (np.where(flights >= schedule.unknown_onset, _UNKNOWN_BIT, 0).astype(np.int64)
                    if schedule.unknown is not None else None)
-        self._present_bits = _bitmask(present, unknown)
-        self._det_bits = _bitmask(present & (intensity >= costs.detectable_fraction * max_intensity), unknown)
-        self._fail_bits = _bitmask(present & (intensity >= costs.failure_fraction * max_intensity))
+        if schedule.schedules:
+            self._present_bits = _bitmask(present, unknown)
+            self._det_bits = _bitmask(present & (intensity >= costs.detectable_fraction * max_intensity), unknown)
+            self._fail_bits = _bitmask(present & (intensity >= costs.failure_fraction * max_intensity))
+        else:  # no mode: the unknown fault's bits only
+            self._present_bits = [0] * n if unknown is None else unknown.tolist()
+            self._det_bits = list(self._present_bits)
+            self._fail_bits = [0] * n
         self._active, self._failed = _ALL, 0
         self._active_log, self._fail_log, self._repair_log, self._cost_log = [], [], [], []
         if self.fidelity == "surrogate":
@@ -686,10 +693,15 @@ class ActuationLoopEnv(gym.Env):
         values, valid = self.surrogate.degrade(parts, intensity, faults)
         # the ten and the extended indicators in one pass (values 0 where invalid, clipped to the bounds)
         columns = self._obs_columns
-        values = values[:, columns]
-        ok = valid[:, columns]
-        ok &= np.isfinite(values)
-        table = _clip(np.where(ok, values, 0.0), _OBS_LOW, _OBS_HIGH).astype(np.float32)
+        if columns is not None:  # (None: the surrogate's columns are the observation's, in order)
+            values, valid = values[:, columns], valid[:, columns]
+        finite = np.isfinite(values)
+        if finite.all():  # degrade's values are already 0 where invalid
+            ok = valid
+        else:
+            ok = valid & finite
+            values = np.where(ok, values, 0.0)
+        table = _clip(values, _OBS_LOW, _OBS_HIGH).astype(np.float32)
         flags = ok.astype(np.int8)
         if start:
             self._table[start:] = table
@@ -866,7 +878,10 @@ class ActuationLoopEnv(gym.Env):
     def _episode_truth(self) -> dict:
         n = len(self._cost_log)
         active = np.array(self._active_log[:n], dtype=np.int64)
-        flown = self._intensity[:n] * ((active[:, None] & _BITS) != 0)
+        if any(self._repair_log):
+            flown = self._intensity[:n] * ((active[:, None] & _BITS) != 0)
+        else:  # every mode active on every flight: x * 1.0 is x, bit for bit
+            flown = self._intensity[:n].copy()
         return {
             "unit_id": self._unit_id,
             "flight_index": np.arange(n, dtype=np.int64),

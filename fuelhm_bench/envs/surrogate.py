@@ -770,7 +770,8 @@ class SurrogateModel:
                 if lossy[d, j]:
                     nearest = np.minimum(i0 + (parts["uniforms"][:, j] < w), last)
                     valid = valid & ~self.response_invalid[d, j, nearest]
-            out = self._interact(out, intensities, parts["doe_units"], set(active.tolist()))
+            if self._pair_index:
+                out = self._interact(out, intensities, parts["doe_units"], set(active.tolist()))
         if faults is not None:
             out, valid = self._add_faults(out, valid, parts, faults, coordinates)
         return np.where(valid, out, 0.0), valid
