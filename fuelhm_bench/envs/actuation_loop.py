@@ -59,7 +59,11 @@ _XLOW = np.array([EXTENDED_INDICATOR_BOUNDS[n][0] for n in EXTENDED_INDICATOR_NA
 _XHIGH = np.array([EXTENDED_INDICATOR_BOUNDS[n][1] for n in EXTENDED_INDICATOR_NAMES], dtype=np.float32)
 _N_EXT = len(EXTENDED_INDICATOR_NAMES)
 _N_IND = len(INDICATOR_NAMES)
-_OBS_LOW, _OBS_HIGH = np.concatenate([_LOW, _XLOW]), np.concatenate([_HIGH, _XHIGH])  # the ten, then the extended
+_NO_ONSET = np.full(_N_MODES, -1, dtype=np.int64)
+_OBS_KEYS = ("indicators", "valid", "extended", "extended_valid")
+# the ten, then the extended; float64 (exact) so that clipping float64 draws casts nothing
+_OBS_LOW = np.concatenate([_LOW, _XLOW]).astype(np.float64)
+_OBS_HIGH = np.concatenate([_HIGH, _XHIGH]).astype(np.float64)
 
 
 def _ufunc_clip():
@@ -459,6 +463,9 @@ class ActuationLoopEnv(gym.Env):
         self.action_space = spaces.Dict({"alarm": spaces.Discrete(2),
                                          "guilt": spaces.Box(0.0, 1.0, (_N_MODES,), np.float32)})
         self._t = -1  # no episode yet
+        self._flights = np.arange(self.n_flights)
+        self._last_flight = self.n_flights - 1
+        self._flights.setflags(write=False)
         self._raw_flight = False
         self._replays: dict[int, dict[str, np.ndarray]] = {}
 
@@ -567,8 +574,8 @@ class ActuationLoopEnv(gym.Env):
         # Truth: scheduled intensities, thresholds, per-flight bitmasks.
         intensity = np.zeros((n, _N_MODES))
         max_intensity = np.zeros(_N_MODES)
-        onset = np.full(_N_MODES, -1, dtype=np.int64)
-        flights = np.arange(n)
+        onset = _NO_ONSET.copy()
+        flights = self._flights
         for s, o in zip(schedule.schedules, schedule.onsets):
             j = MODE_IDS.index(s.mode)
             intensity[:, j] = s.intensity(flights, o)
@@ -695,34 +702,35 @@ class ActuationLoopEnv(gym.Env):
         columns = self._obs_columns
         if columns is not None:  # (None: the surrogate's columns are the observation's, in order)
             values, valid = values[:, columns], valid[:, columns]
-        finite = np.isfinite(values)
-        if finite.all():  # degrade's values are already 0 where invalid
-            ok = valid
+        if math.isfinite(values.sum()):  # every value finite (a NaN or inf would make the sum so): degrade's
+            ok = valid                   # values are already 0 where invalid
         else:
-            ok = valid & finite
+            ok = valid & np.isfinite(values)
             values = np.where(ok, values, 0.0)
-        table = _clip(values, _OBS_LOW, _OBS_HIGH).astype(np.float32)
-        flags = ok.astype(np.int8)
+        table = _clip(values, _OBS_LOW, _OBS_HIGH)
+        n = _N_IND
+        tables = (table[:, :n].astype(np.float32), ok[:, :n].astype(np.int8),
+                  table[:, n:].astype(np.float32), ok[:, n:].astype(np.int8))
         if start:
-            self._table[start:] = table
-            self._flags[start:] = flags
+            for mine, new in zip(self._obs_tables, tables):
+                mine[start:] = new
         else:
-            self._table, self._flags = table, flags
+            self._obs_tables = tables
 
     @property
     def _tables(self) -> dict:
-        """The episode's surrogate observations, per key (views of its rows)."""
-        n = len(INDICATOR_NAMES)
-        return {"indicators": self._table[:, :n], "valid": self._flags[:, :n],
-                "extended": self._table[:, n:], "extended_valid": self._flags[:, n:]}
+        """The episode's surrogate observations, per key."""
+        return dict(zip(_OBS_KEYS, self._obs_tables))
 
-    def _surrogate_observation(self, t: int, copy: bool = False) -> dict:
-        """Flight ``t``'s observation: views of the episode's rows (a row is never written once observed: a
-        repair rewrites later flights only, a reset makes new tables), copies with ``copy``."""
-        table, flags, n = self._table, self._flags, _N_IND
-        obs = {"indicators": table[t, :n], "valid": flags[t, :n], "extended": table[t, n:],
-               "extended_valid": flags[t, n:]}
-        return {key: value.copy() for key, value in obs.items()} if copy else obs
+    def _surrogate_observation(self, t: int) -> dict:
+        """Flight ``t``'s observation: views of its rows (the env never reads a row again once it is observed: a
+        repair rewrites later flights only, a reset makes new tables), copies for the last flight (which the
+        terminal step shows again)."""
+        a, b, c, d = self._obs_tables
+        if t == self._last_flight:
+            return {"indicators": a[t].copy(), "valid": b[t].copy(), "extended": c[t].copy(),
+                    "extended_valid": d[t].copy()}
+        return {"indicators": a[t], "valid": b[t], "extended": c[t], "extended_valid": d[t]}
 
     def _mask(self, bits: int) -> np.ndarray:
         return ((bits & _BITS) != 0).astype(np.float64)
@@ -823,15 +831,19 @@ class ActuationLoopEnv(gym.Env):
         reward = -cost if cost else 0.0
         if t == self.n_flights:
             self._t = -1
-            if self.surrogate is not None:  # (shown a second time: a copy, whatever the agent did to the first)
-                obs = self._surrogate_observation(t - 1, copy=True)
+            if self.surrogate is not None:  # (shown a second time: new copies, whatever the agent did to the first)
+                obs = self._surrogate_observation(t - 1)
             else:
                 obs = {k: v.copy() for k, v in self._last.items()}
             info = {"flight_index": t - 1, "episode_truth": self._episode_truth()}
             terminated = True
         else:
             self._t = t
-            obs = self._observe(t)
+            if self.surrogate is not None:  # (_observe, inlined: the surrogate's hot path)
+                self._active_log.append(self._active)
+                obs = self._surrogate_observation(t)
+            else:
+                obs = self._observe(t)
             info = {"flight_index": t}
             if self._raw_flight:
                 info["raw_flight"] = self._raw_payload

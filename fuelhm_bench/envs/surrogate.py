@@ -749,16 +749,15 @@ class SurrogateModel:
                                  f"experiments flew only {[m for m, ok in zip(self.modes, self.learnt) if ok]}); "
                                  f"use the physics fidelity for them.")
         if last:
-            pool_on = self._flight_pool
+            pool_on, inner = self._flight_pool, grid[1:last]
             for j in active.tolist():
                 f = intensities[:, j]
                 d = parts["doe_units"][j]
-                curve = self.response_curve(j, d, coordinates)
+                curve = self.response_mean[j] + self.response_map[j] @ coordinates + self.responses[d, j]
                 slopes = (curve[1:] - curve[:-1]) / dgrid[:, None]  # np.diff, without its Python layer
-                # segment [grid[i0], grid[i0 + 1]]; beyond the largest knot the last segment continues
-                i0 = grid.searchsorted(f, side="right") - 1
-                np.minimum(i0, last - 1, out=i0)
-                np.maximum(i0, 0, out=i0)
+                # segment [grid[i0], grid[i0 + 1]]; beyond the largest knot the last segment continues (searching
+                # the inner knots is searching the grid and clamping to [0, last - 1])
+                i0 = inner.searchsorted(f, side="right")
                 offset = f - grid[i0]
                 out = out + curve[i0] + offset[:, None] * slopes[i0]
                 if pool_on or lossy[d, j]:
