@@ -30,7 +30,7 @@ companion (the ten of Table I, and any extended indicator the extractor adds:
 all are learnt and drawn alike). A unit's flights are then drawn as::
 
     I[flight] = mean + A z + u + r[flight] + sum_m [D_m(f_m[flight]; z) + d_m[flight](f_m[flight])]
-                + sum_{a<b} X_ab(f_a[flight], f_b[flight])
+                + sum_{a<b} X_ab(f_a[flight], f_b[flight]) + sum_k present_k[flight] [F_k(z) + e_k[flight]]
 
 1. ``mean + A z``: the unit mean at its coordinates, a ridge regression of the
    physics units' means on ``[1, z]`` (intercept not penalised). Without
@@ -75,6 +75,13 @@ all are learnt and drawn alike). A unit's flights are then drawn as::
    kept per DOE unit (the one drawn for ``a``); bilinear between the pair
    intensities, 0 when either mode is at 0, held beyond the largest. Three or
    more modes add their pairs' interactions.
+7. ``F_k + e_k``: the response to a fault ``k`` outside the seven modes (a
+   scenario's ``unknown_faults``) on the flights where it is present, from DOE
+   flights of each unit with the fault at full strength (mode
+   :func:`~fuelhm_bench.datasets.doe.fault_case`): learnt as a mode at its one
+   intensity (``F_k`` regressed on the coordinates plus a DOE unit's own
+   residual, ``e_k`` a row of its pool of mission deviations, its lost
+   indicators lost) and held whatever the flight (:attr:`SurrogateModel.faults`).
 
 Estimation error. Everything is estimated from a finite physics sample, and
 the fitted surrogate says how much (:attr:`SurrogateModel.fit_info`,
@@ -91,9 +98,10 @@ beyond their pairs', indicators lost only when two modes act together, the
 link between a flight's healthy residual and its response deviation (drawn
 independently; the physics flies both on one mission), non-linear dependence
 of the unit mean or of a response on the coordinates, correlation between
-consecutive flights of a unit beyond the shared unit effect, and a Gaussian
-shape for the unexplained unit part (its covariance is kept, its shape is not).
-Faults outside the seven modes are not modelled.
+consecutive flights of a unit beyond the shared unit effect, a Gaussian
+shape for the unexplained unit part (its covariance is kept, its shape is not),
+and a fault outside the seven modes at another strength than the declared one
+or together with a mode.
 """
 
 from __future__ import annotations
