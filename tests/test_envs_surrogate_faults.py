@@ -173,3 +173,61 @@ def test_scenarios_with_different_unknown_faults_never_share_a_surrogate(tmp_pat
     assert len(entries) == 2, entries
     assert set(a["mode"]) ^ set(b["mode"]) == {"unknown:torque_motor_hysteresis@width_a=0.002",
                                                 "unknown:torque_motor_hysteresis@width_a=0.001"}
+
+
+def test_fit_surrogate_learns_a_fault_like_a_mode_at_one_intensity():
+    """Synthetic tables (no simulation): a fault that shifts A by 3 + unit and makes B invalid."""
+    from test_envs_surrogate import MODES, doe_table, healthy_table
+
+    from fuelhm_bench.envs.surrogate import fit_surrogate
+
+    doe = doe_table()
+    healthy_rows = doe[doe["mode"] == "healthy"].copy()
+    fault = healthy_rows.copy()
+    fault["mode"], fault["intensity"] = "unknown:lvdt_lag", 1.0
+    fault["A"] = fault["A"] + 3.0 + fault["unit_id"]  # a unit-to-unit spread of the response
+    fault["C"] = 0.5 * (fault["A"] + fault["B"])
+    fault["B_valid"] = False
+    model = fit_surrogate(healthy_table(), pd.concat([doe, fault], ignore_index=True), modes=MODES, bootstrap=0)
+    assert model.faults == ("unknown:lvdt_lag",) and model.fault_learnt.tolist() == [True]
+    spread = 3.0 + np.arange(5)
+    np.testing.assert_allclose(model.fault_mean[0, 0] + model.fault_responses[:, 0, 0], spread, atol=1e-9)
+    assert model.fault_invalid[:, 0, 1].all() and not model.fault_invalid[:, 0, [0, 2, 3, 4]].any()
+    rng = np.random.default_rng(0)
+    parts = model.draw_parts(rng, 6)
+    present = np.zeros((6, 1), dtype=bool)
+    present[2:] = True
+    clean, clean_valid = model.degrade(parts, np.zeros((6, 2)))
+    values, valid = model.degrade(parts, np.zeros((6, 2)), present)
+    np.testing.assert_array_equal(values[:2], clean[:2])  # before the onset: the healthy draws
+    shift = values[2:, 0] - clean[2:, 0]
+    np.testing.assert_allclose(shift, shift[0])  # one mission: no flight-to-flight deviation, a unit's own shift
+    assert np.isclose(spread, shift[0]).any()  # one DOE unit's own response
+    assert not valid[2:, 1].any() and clean_valid[2:, 1].any()
+    with pytest.raises(ParameterError, match="'faults' parameter of SurrogateModel.degrade"):
+        model.degrade(parts, np.zeros((6, 2)), np.full((6, 1), 2))
+    unlearnt = fit_surrogate(healthy_table(), doe, modes=MODES, bootstrap=0, faults=("unknown:lvdt_lag",))
+    assert unlearnt.fault_learnt.tolist() == [False]
+    with pytest.raises(ParameterError, match="not learnt for the fault"):
+        unlearnt.degrade(unlearnt.draw_parts(rng, 6), np.zeros((6, 2)), present)
+    # a model without faults draws exactly what it drew before faults existed
+    plain = fit_surrogate(healthy_table(), doe, modes=MODES, bootstrap=0)
+    a, b = plain.draw_parts(np.random.default_rng(5), 6), model.draw_parts(np.random.default_rng(5), 6)
+    np.testing.assert_array_equal(a["healthy"], b["healthy"])
+    assert "fault_units" not in a
+
+
+@pytest.mark.slow  # (both fidelities of the panel's runs: about 5 CPU-s beyond the module's knowledge)
+def test_the_fidelity_check_runs_a_scenario_with_unknown_faults(setup):
+    from fuelhm_baselines.paper_mahalanobis import PaperMahalanobis
+    from fuelhm_baselines.trivial import NullMethod
+
+    from fuelhm_bench.benchmark.fidelity import fidelity_check
+
+    sc, _, cache = setup
+    report = fidelity_check(sc, methods={"null": NullMethod(), "paper": PaperMahalanobis(cv=None)},
+                            flight_minutes=FLIGHT_MINUTES, knowledge_size=knowledge_size(), cache_dir=cache,
+                            timeout_s=120)
+    methods = report.methods.set_index("method")
+    assert (methods["status_physics"] == "ok").all() and (methods["status_surrogate"] == "ok").all()
+    assert np.isfinite(methods["summary_surrogate"]).all()
