@@ -194,7 +194,9 @@ class ActuationLoopEnv(gym.Env):
     ``valid[i]`` (``extended_valid[i]``) is 1 when indicator ``i`` was extracted, 0 when the
     flight's data did not support it; an invalid indicator is reported as 0 in
     ``"indicators"`` (``"extended"``), never NaN. Values are clipped to the bounds (shipped
-    scenarios stay well inside). With ``fidelity="surrogate"`` the extended indicators are
+    scenarios stay well inside). The arrays of an observation are the agent's to keep or modify: the
+    environment never reads them again (at surrogate fidelity they are views of the episode's table
+    rows, the last flight's copies). With ``fidelity="surrogate"`` the extended indicators are
     drawn by the surrogate like the ten (it must have learnt them: a surrogate without them is
     refused with :class:`~fuelhm_bench.errors.DataFormatError`). ``"raw"`` (physics only) is the recorded
     flight resampled by linear interpolation to ``raw_samples`` equally spaced
