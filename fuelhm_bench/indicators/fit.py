@@ -127,6 +127,14 @@ def _solve_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, anchor, margin, nm, rhs, chol,
     _add_segment(nm, rhs, p, k2, k3, 1.0, b2 - b1, -b2, 0.0, 2)
     _add_segment(nm, rhs, p, k3, k4, 1.0, b2 - b1, b3 - b2, -b3, 3)
     _add_segment(nm, rhs, p, k4, n_bins, 1.0, b2 - b1, b3 - b2, b4 - b3, 0)
+    return _finish_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, nm, rhs, chol, theta)
+
+
+@njit(cache=True, nogil=True)
+def _finish_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, nm, rhs, chol, theta):
+    """The second half of :func:`_solve_sse`, once the normal equations ``nm``, ``rhs`` hold
+    all five segments: solve, check the structural constraints, return the weighted SSE."""
+    n_bins = p.shape[1] - 1
     trace = nm[0, 0] + nm[1, 1] + nm[2, 2] + nm[3, 3]
     # Cholesky of the ridged normal matrix.
     for r in range(4):
@@ -225,18 +233,46 @@ def _search(p, centres, cand, cand_k, coarse, anchor, margin, n_refine_sweeps):
     n_c = coarse.shape[0]
     best = np.inf
     idx = np.zeros(4, dtype=np.int64)
-    # 1. exhaustive coarse search over ordered 4-tuples
+    # 1. exhaustive coarse search over ordered 4-tuples. The same sums as _solve_sse for each
+    # tuple, in the same order, but the terms of the segments left of the inner loops' breakpoints
+    # are added once per outer loop (nm_ab: segments A, B; nm_abc: + C) and copied, and a tuple
+    # the anchor rejects (X1 = b2, X2 = b3) is skipped before its inner loops: the same SSEs.
+    nm_ab = np.zeros((4, 4))
+    rhs_ab = np.zeros(4)
+    nm_abc = np.zeros((4, 4))
+    rhs_abc = np.zeros(4)
+    n_bins = p.shape[1] - 1
+    check_anchor = anchor == anchor  # a NaN anchor disables the constraint
     for a in range(n_c):
         ga = coarse[a]
+        b1, k1 = cand[ga], cand_k[ga]
         for b in range(a + 1, n_c):
             gb = coarse[b]
+            b2, k2 = cand[gb], cand_k[gb]
+            if check_anchor and not b2 <= anchor - margin:
+                continue
+            for r in range(4):
+                rhs_ab[r] = 0.0
+                for s in range(4):
+                    nm_ab[r, s] = 0.0
+            _add_segment(nm_ab, rhs_ab, p, 0, k1, 1.0, 0.0, 0.0, 0.0, 0)
+            _add_segment(nm_ab, rhs_ab, p, k1, k2, 1.0, -b1, 0.0, 0.0, 1)
             for c in range(b + 1, n_c):
                 gc = coarse[c]
+                b3, k3 = cand[gc], cand_k[gc]
+                if check_anchor and not b3 >= anchor + margin:
+                    continue
+                nm_abc[:, :] = nm_ab
+                rhs_abc[:] = rhs_ab
+                _add_segment(nm_abc, rhs_abc, p, k2, k3, 1.0, b2 - b1, -b2, 0.0, 2)
                 for d in range(c + 1, n_c):
                     gd = coarse[d]
-                    sse = _solve_sse(p, cand[ga], cand[gb], cand[gc], cand[gd], cand_k[ga],
-                                     cand_k[gb], cand_k[gc], cand_k[gd], anchor, margin,
-                                     nm, rhs, chol, theta)
+                    b4, k4 = cand[gd], cand_k[gd]
+                    nm[:, :] = nm_abc
+                    rhs[:] = rhs_abc
+                    _add_segment(nm, rhs, p, k3, k4, 1.0, b2 - b1, b3 - b2, -b3, 3)
+                    _add_segment(nm, rhs, p, k4, n_bins, 1.0, b2 - b1, b3 - b2, b4 - b3, 0)
+                    sse = _finish_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, nm, rhs, chol, theta)
                     if sse < best:
                         best = sse
                         idx[0], idx[1], idx[2], idx[3] = ga, gb, gc, gd
