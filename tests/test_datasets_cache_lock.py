@@ -44,3 +44,47 @@ def test_without_disk_cache_the_build_runs_unlocked():
                           lambda tables: tables["t"], {})
     assert calls == [1] and list(table["x"]) == [1]
     cache._MEMORY.pop("m" * 64, None)
+
+
+def _hold_then_fork(entry, child_pid, started):
+    import os
+
+    with cache._build_lock(entry):
+        pid = os.fork()  # like a worker pool forked during a build: it outlives the build
+        if pid == 0:
+            time.sleep(30)
+            os._exit(0)
+    child_pid.value = pid
+    started.set()
+    os.waitpid(pid, 0)
+
+
+def _take(entry):
+    with cache._build_lock(entry):
+        pass
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs fork")
+def test_a_process_forked_during_a_build_does_not_keep_the_lock(tmp_path):
+    import os
+    import signal
+
+    ctx = multiprocessing.get_context("fork")
+    entry = tmp_path / "cache" / "fleet-kkkk"
+    started, child_pid = ctx.Event(), ctx.Value("i", 0)
+    holder = ctx.Process(target=_hold_then_fork, args=(entry, child_pid, started))
+    holder.start()
+    try:
+        assert started.wait(30)
+        taker = ctx.Process(target=_take, args=(entry,))
+        taker.start()
+        taker.join(10)
+        ok = taker.exitcode == 0
+        if not ok:
+            taker.kill()
+            taker.join()
+        assert ok, "the lock stayed held by the process forked during the build"
+    finally:
+        if child_pid.value:
+            os.kill(child_pid.value, signal.SIGKILL)
+        holder.join(10)

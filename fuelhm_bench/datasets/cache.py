@@ -376,9 +376,12 @@ def _load_product(entry: Path | None, key: str, names: tuple[str, ...],
 
 @contextlib.contextmanager
 def _build_lock(entry: Path | None):
-    """Hold an exclusive advisory lock on ``<entry>.lock`` (POSIX ``flock``) while a product is built.
+    """Hold an exclusive advisory lock on ``<entry>.lock`` (a POSIX record lock, ``lockf``) while a product is built.
 
-    The lock file is left in place (removing it would race with a process about to lock it).
+    A record lock belongs to this process only: the processes a build forks (the pools of
+    :mod:`fuelhm_bench.datasets.parallel`, which outlive it) inherit the file but not the lock, so
+    it is released when the build ends. The lock file is left in place (removing it would race
+    with a process about to lock it).
     Without a disk cache, without ``fcntl`` (Windows) or when the lock cannot be taken (a
     read-only or lock-less file system), the build simply goes ahead unlocked: a duplicate
     build only costs time, since entries are written atomically.
@@ -390,7 +393,7 @@ def _build_lock(entry: Path | None):
 
             entry.parent.mkdir(parents=True, exist_ok=True)
             handle = open(entry.with_name(entry.name + ".lock"), "a")  # noqa: SIM115 - closed below
-            fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+            fcntl.lockf(handle.fileno(), fcntl.LOCK_EX)
         except (ImportError, OSError):
             if handle is not None:
                 handle.close()
