@@ -376,7 +376,8 @@ def _load_product(entry: Path | None, key: str, names: tuple[str, ...],
 
 @contextlib.contextmanager
 def _build_lock(entry: Path | None):
-    """Hold an exclusive advisory lock on ``<entry>.lock`` (a POSIX record lock, ``lockf``) while a product is built.
+    """Hold an exclusive advisory lock on ``fuelhm-v<format>-locks/<entry name>.lock`` (a POSIX record
+    lock, ``lockf``) beside the entries' folder while a product is built.
 
     A record lock belongs to this process only: the processes a build forks (the pools of
     :mod:`fuelhm_bench.datasets.parallel`, which outlive it) inherit the file but not the lock, so
@@ -391,8 +392,9 @@ def _build_lock(entry: Path | None):
         try:
             import fcntl
 
-            entry.parent.mkdir(parents=True, exist_ok=True)
-            handle = open(entry.with_name(entry.name + ".lock"), "a")  # noqa: SIM115 - closed below
+            locks = entry.parent.with_name(entry.parent.name + "-locks")  # beside the entries, not among them
+            locks.mkdir(parents=True, exist_ok=True)
+            handle = open(locks / (entry.name + ".lock"), "a")  # noqa: SIM115 - closed below
             fcntl.lockf(handle.fileno(), fcntl.LOCK_EX)
         except (ImportError, OSError):
             if handle is not None:
