@@ -29,3 +29,12 @@ def test_lazy_scoring_names_are_the_functions_not_the_submodules():
     assert callable(robustness_table) and not isinstance(robustness, types.ModuleType)
     assert all(getattr(scoring, name) is not None for name in scoring.__all__)
     assert set(scoring.__all__) <= set(dir(scoring))
+
+
+def test_data_builds_import_no_plotting():
+    # A Dask worker or a sealed method's zygote that loads published knowledge never draws: it must not pay
+    # matplotlib's import (about 0.6 CPU-s per process).
+    loaded = _modules_after("import fuelhm_bench.benchmark.harness, fuelhm_bench.datasets.knowledge, "
+                            "fuelhm_bench.diagnosis")
+    assert "fuelhm_bench.diagnosis.signatures" in loaded
+    assert "matplotlib" not in loaded

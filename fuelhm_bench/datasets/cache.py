@@ -41,6 +41,7 @@ keeps products in memory only.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -345,23 +346,68 @@ def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callabl
     if key in _MEMORY:
         _MEMORY.move_to_end(key)
         return _MEMORY[key]
-    product = None
-    if entry is not None:
-        tables = _load(entry, key, names)
-        if tables is not None:
-            try:
-                product = finish(tables)
-            except Exception:  # noqa: BLE001 - a damaged entry is rebuilt, never trusted
-                product = None
+    product = _load_product(entry, key, names, finish)
     if product is None:
-        tables = build()
-        product = finish(tables)
-        if entry is not None:
-            _store(entry, key, tables, meta)
+        # One builder per product at a time: a process that finds another one building it (e.g. two
+        # Dask workers building scenarios that share a fleet) waits for it, then reads its entry.
+        with _build_lock(entry):
+            product = _load_product(entry, key, names, finish)
+            if product is None:
+                tables = build()
+                product = finish(tables)
+                if entry is not None:
+                    _store(entry, key, tables, meta)
     _MEMORY[key] = product
     if len(_MEMORY) > _MEMORY_SIZE:
         _MEMORY.popitem(last=False)
     return product
+
+
+def _load_product(entry: Path | None, key: str, names: tuple[str, ...],
+                  finish: Callable[[dict[str, pd.DataFrame]], object]):
+    """The product stored in ``entry``, or None (no disk cache, absent, stale or damaged: rebuilt, never trusted)."""
+    if entry is None:
+        return None
+    tables = _load(entry, key, names)
+    if tables is None:
+        return None
+    try:
+        return finish(tables)
+    except Exception:  # noqa: BLE001 - a damaged entry is rebuilt, never trusted
+        return None
+
+
+@contextlib.contextmanager
+def _build_lock(entry: Path | None):
+    """Hold an exclusive advisory lock on ``fuelhm-v<format>-locks/<entry name>.lock`` (a POSIX record
+    lock, ``lockf``) beside the entries' folder while a product is built.
+
+    A record lock belongs to this process only: the processes a build forks (the pools of
+    :mod:`fuelhm_bench.datasets.parallel`, which outlive it) inherit the file but not the lock, so
+    it is released when the build ends. The lock file is left in place (removing it would race
+    with a process about to lock it).
+    Without a disk cache, without ``fcntl`` (Windows) or when the lock cannot be taken (a
+    read-only or lock-less file system), the build simply goes ahead unlocked: a duplicate
+    build only costs time, since entries are written atomically.
+    """
+    handle = None
+    if entry is not None:
+        try:
+            import fcntl
+
+            locks = entry.parent.with_name(entry.parent.name + "-locks")  # beside the entries, not among them
+            locks.mkdir(parents=True, exist_ok=True)
+            handle = open(locks / (entry.name + ".lock"), "a")  # noqa: SIM115 - closed below
+            fcntl.lockf(handle.fileno(), fcntl.LOCK_EX)
+        except (ImportError, OSError):
+            if handle is not None:
+                handle.close()
+            handle = None
+    try:
+        yield
+    finally:
+        if handle is not None:
+            handle.close()  # releases the lock
 
 
 def published_knowledge(scenario, *, flight_minutes: float | None = None, size: KnowledgeSize | None = None,

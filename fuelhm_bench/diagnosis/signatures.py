@@ -15,8 +15,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from fuelhm_bench.diagnosis._validation import check_dataframe, check_output_path, param_error
 from fuelhm_bench.diagnosis.healthy import HealthyModel
@@ -193,6 +191,9 @@ def plot_signature_heatmap(sig: pd.DataFrame, out_path, *, decimals: int = 1) ->
     finite = values[np.isfinite(values)]
     vmax = float(np.max(np.abs(finite))) if finite.size and np.any(finite != 0) else 1.0
     n_rows, n_cols = values.shape
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # imported to plot only (not by data builds)
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(0.9 * n_cols + 3.5, 0.55 * n_rows + 1.5), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()

@@ -65,6 +65,51 @@ def first_order_filter(x: np.ndarray, gain: float, pole: float, z0: float) -> np
     return y
 
 
+@njit(cache=True, nogil=True)
+def _add_first_order_filter(x: np.ndarray, gain: float, pole: float, z0: float, out: np.ndarray) -> None:
+    """``out += first_order_filter(x, gain, pole, z0)`` in one pass, without the filtered array (the same bits)."""
+    a1 = -pole
+    z = z0
+    for k in range(x.shape[0]):
+        xk = x[k]
+        yk = z + gain * xk
+        z = 0.0 * xk - a1 * yk
+        out[k] = out[k] + yk
+
+
+@njit(cache=True, nogil=True)
+def _engine_schedule(n2, n2_max, n2_low, n2_span, low_m, span_m, sweep):
+    """One pass over a flight's N2 [-], bit for bit the NumPy steps of :meth:`MissionProfile.sample`:
+    ``n2`` clipped to [0, n2_max] in place; the demand [m] of :meth:`MissionProfile.demand_from_n2`
+    (``low + clip((n2 - a) / (b - a), 0, 1) * (high - low)``), its first ``len(sweep)`` samples
+    replaced by the test sweep; and the recorded ``100 n2`` [%] and ``1e3 demand`` [mm]."""
+    n = n2.shape[0]
+    m = sweep.shape[0]
+    demand = np.empty(n)
+    n2_pct = np.empty(n)
+    demand_mm = np.empty(n)
+    for k in range(n):
+        v = n2[k]
+        if v < 0.0:
+            v = 0.0
+        elif v > n2_max:
+            v = n2_max
+        n2[k] = v
+        if k < m:
+            d = sweep[k]
+        else:
+            u = (v - n2_low) / n2_span
+            if u < 0.0:
+                u = 0.0
+            elif u > 1.0:
+                u = 1.0
+            d = u * span_m + low_m
+        demand[k] = d
+        n2_pct[k] = 100.0 * v
+        demand_mm[k] = 1e3 * d
+    return demand, n2_pct, demand_mm
+
+
 @dataclass(frozen=True)
 class MissionProfile:
     """Parameters of the flight profile.
@@ -224,14 +269,15 @@ class MissionProfile:
             b = np.exp(-T / self.n2_noise_time_constant_s)
             drive = rng.normal(0.0, self.n2_noise_std * np.sqrt(1.0 - b * b), n - n_start)
             start = b * rng.normal(0.0, self.n2_noise_std)  # stationary initial state
-            target[n_start:] += first_order_filter(drive, 1.0, float(b), float(start))
+            _add_first_order_filter(drive, 1.0, float(b), float(start), target[n_start:])
         # HP spool: first-order lag behind the speed demand (exact discrete update).
         a = np.exp(-T / self.engine_time_constant_s)
         n2 = first_order_filter(target, float(1 - a), float(a), float(a * target[0]))
-        np.clip(n2, 0.0, 1.15, out=n2)
-        demand = self.demand_from_n2(n2)
-        if self.test_sweep and n_start > 0:
-            demand[:n_start] = self._test_sweep(n_start)
+        # N2 clipped to [0, 1.15], the scheduled demand (test sweep first) and the recorded channels, in one pass.
+        sweep = self._test_sweep(n_start) if self.test_sweep and n_start > 0 else np.empty(0)
+        demand, n2_pct, demand_mm = _engine_schedule(
+            n2, 1.15, float(self.schedule_n2_low), float(self.schedule_n2_high - self.schedule_n2_low),
+            float(self.sweep_low_m), float(self.sweep_high_m - self.sweep_low_m), sweep)
         temp0 = self.fuel_temp_start_degc + rng.normal(0.0, 8.0)
         temp1 = self.fuel_temp_end_degc + rng.normal(0.0, 8.0)
         tau = 0.3 * self.duration_s
@@ -244,9 +290,9 @@ class MissionProfile:
         np.multiply(fuel_temp, temp0 - temp1, out=fuel_temp)
         np.add(fuel_temp, temp1, out=fuel_temp)
         extras = {
-            "n2_pct": 100.0 * n2,
+            "n2_pct": n2_pct,
             "fuel_temp_degC": fuel_temp,
             "phase": phase,
-            "demand_mm": 1e3 * demand,
+            "demand_mm": demand_mm,
         }
         return FlightInputs(demand, n2, T, extras=extras)

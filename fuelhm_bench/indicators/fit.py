@@ -108,7 +108,7 @@ def _add_segment(nm, rhs, p, lo, hi, a0, a1, a2, a3, j):
 
 
 @njit(cache=True, nogil=True)
-def _solve_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, anchor, margin, nm, rhs, chol, theta):
+def _solve_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, anchor, margin, nm, rhs, theta):
     """Weighted SSE of the best model with breakpoints b1..b4 (bins split at k1..k4).
 
     Returns inf when the model violates a structural constraint (see the module docstring).
@@ -127,42 +127,98 @@ def _solve_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, anchor, margin, nm, rhs, chol,
     _add_segment(nm, rhs, p, k2, k3, 1.0, b2 - b1, -b2, 0.0, 2)
     _add_segment(nm, rhs, p, k3, k4, 1.0, b2 - b1, b3 - b2, -b3, 3)
     _add_segment(nm, rhs, p, k4, n_bins, 1.0, b2 - b1, b3 - b2, b4 - b3, 0)
+    return _finish_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, nm, rhs, theta)
+
+
+@njit(cache=True, nogil=True)
+def _finish_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, nm, rhs, theta):
+    """The second half of :func:`_solve_sse`, once the normal equations ``nm``, ``rhs`` hold
+    all five segments: solve (``theta`` receives the coefficients), check the structural
+    constraints, return the weighted SSE.
+
+    The Cholesky factorisation of the ridged normal matrix and the two substitutions are
+    written out on scalars (the loops over r, s, q of the textbook algorithm, unrolled, with
+    every operation in their order), so that the solve runs in registers.
+    """
+    n_bins = p.shape[1] - 1
     trace = nm[0, 0] + nm[1, 1] + nm[2, 2] + nm[3, 3]
-    # Cholesky of the ridged normal matrix.
-    for r in range(4):
-        for s in range(r + 1):
-            acc = nm[r, s]
-            if r == s:
-                acc += _RIDGE * nm[r, r] + _RIDGE * 1e-3 * trace + 1e-300
-            for q in range(s):
-                acc -= chol[r, q] * chol[s, q]
-            if r == s:
-                if acc <= 0.0:
-                    return np.inf
-                chol[r, r] = math.sqrt(acc)
-            else:
-                chol[r, s] = acc / chol[s, s]
-    for r in range(4):  # forward substitution
-        acc = rhs[r]
-        for q in range(r):
-            acc -= chol[r, q] * theta[q]
-        theta[r] = acc / chol[r, r]
-    for r in range(3, -1, -1):  # back substitution
-        acc = theta[r]
-        for q in range(r + 1, 4):
-            acc -= chol[q, r] * theta[q]
-        theta[r] = acc / chol[r, r]
+    ridge = _RIDGE * 1e-3 * trace
+    # Cholesky: acc = nm[r, s] (+ ridge on the diagonal) - sum_q chol[r, q] chol[s, q], then
+    # chol[r, r] = sqrt(acc) or chol[r, s] = acc / chol[s, s].
+    acc = nm[0, 0] + (_RIDGE * nm[0, 0] + ridge + 1e-300)
+    if acc <= 0.0:
+        return np.inf
+    c00 = math.sqrt(acc)
+    c10 = nm[1, 0] / c00
+    acc = nm[1, 1] + (_RIDGE * nm[1, 1] + ridge + 1e-300)
+    acc -= c10 * c10
+    if acc <= 0.0:
+        return np.inf
+    c11 = math.sqrt(acc)
+    c20 = nm[2, 0] / c00
+    acc = nm[2, 1]
+    acc -= c20 * c10
+    c21 = acc / c11
+    acc = nm[2, 2] + (_RIDGE * nm[2, 2] + ridge + 1e-300)
+    acc -= c20 * c20
+    acc -= c21 * c21
+    if acc <= 0.0:
+        return np.inf
+    c22 = math.sqrt(acc)
+    c30 = nm[3, 0] / c00
+    acc = nm[3, 1]
+    acc -= c30 * c10
+    c31 = acc / c11
+    acc = nm[3, 2]
+    acc -= c30 * c20
+    acc -= c31 * c21
+    c32 = acc / c22
+    acc = nm[3, 3] + (_RIDGE * nm[3, 3] + ridge + 1e-300)
+    acc -= c30 * c30
+    acc -= c31 * c31
+    acc -= c32 * c32
+    if acc <= 0.0:
+        return np.inf
+    c33 = math.sqrt(acc)
+    # forward substitution
+    t0 = rhs[0] / c00
+    acc = rhs[1]
+    acc -= c10 * t0
+    t1 = acc / c11
+    acc = rhs[2]
+    acc -= c20 * t0
+    acc -= c21 * t1
+    t2 = acc / c22
+    acc = rhs[3]
+    acc -= c30 * t0
+    acc -= c31 * t1
+    acc -= c32 * t2
+    t3 = acc / c33
+    # back substitution
+    t3 = t3 / c33
+    acc = t2
+    acc -= c32 * t3
+    t2 = acc / c22
+    acc = t1
+    acc -= c21 * t2
+    acc -= c31 * t3
+    t1 = acc / c11
+    acc = t0
+    acc -= c10 * t1
+    acc -= c20 * t2
+    acc -= c30 * t3
+    t0 = acc / c00
+    theta[0], theta[1], theta[2], theta[3] = t0, t1, t2, t3
     # Structural constraints on the segments that hold data: positive gains, and a null
     # region flatter than its neighbours (G_null < G_in, G_null < G_out).
     has_in, has_null, has_out = k2 > k1, k3 > k2, k4 > k3
-    if (has_in and not theta[1] > 0.0) or (has_null and not theta[2] > 0.0) or (
-            has_out and not theta[3] > 0.0):
+    if (has_in and not t1 > 0.0) or (has_null and not t2 > 0.0) or (has_out and not t3 > 0.0):
         return np.inf
-    if has_null and ((has_in and not theta[1] > theta[2]) or (has_out and not theta[3] > theta[2])):
+    if has_null and ((has_in and not t1 > t2) or (has_out and not t3 > t2)):
         return np.inf
     if has_null:  # inlet side retracts (Y1 < 0), outlet side extends (Y2 > 0)
-        y1 = theta[0] + theta[1] * (b2 - b1)
-        y2 = y1 + theta[2] * (b3 - b2)
+        y1 = t0 + t1 * (b2 - b1)
+        y2 = y1 + t2 * (b3 - b2)
         if not (y1 < 0.0 < y2):
             return np.inf
     sse = p[5, n_bins]
@@ -174,27 +230,27 @@ def _solve_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, anchor, margin, nm, rhs, chol,
 
 
 @njit(cache=True, nogil=True)
-def _sse_at(p, centres, bp, anchor, margin, nm, rhs, chol, theta):
+def _sse_at(p, centres, bp, anchor, margin, nm, rhs, theta):
     """Weighted SSE for arbitrary (continuous) breakpoints ``bp``."""
     k1 = np.searchsorted(centres, bp[0])
     k2 = np.searchsorted(centres, bp[1])
     k3 = np.searchsorted(centres, bp[2])
     k4 = np.searchsorted(centres, bp[3])
     return _solve_sse(p, bp[0], bp[1], bp[2], bp[3], k1, k2, k3, k4, anchor, margin,
-                      nm, rhs, chol, theta)
+                      nm, rhs, theta)
 
 
 @njit(cache=True, nogil=True)
-def _golden(p, centres, bp, q, lo, hi, anchor, margin, nm, rhs, chol, theta):
+def _golden(p, centres, bp, q, lo, hi, anchor, margin, nm, rhs, theta):
     """Golden-section minimum of the SSE over breakpoint ``q`` in [lo, hi], others fixed."""
     trial = bp.copy()
     xa, xb = lo, hi
     x1 = xa + _GOLDEN * (xb - xa)
     x2 = xb - _GOLDEN * (xb - xa)
     trial[q] = x1
-    f1 = _sse_at(p, centres, trial, anchor, margin, nm, rhs, chol, theta)
+    f1 = _sse_at(p, centres, trial, anchor, margin, nm, rhs, theta)
     trial[q] = x2
-    f2 = _sse_at(p, centres, trial, anchor, margin, nm, rhs, chol, theta)
+    f2 = _sse_at(p, centres, trial, anchor, margin, nm, rhs, theta)
     for _it in range(80):
         if xb - xa < 1e-10:
             break
@@ -202,14 +258,14 @@ def _golden(p, centres, bp, q, lo, hi, anchor, margin, nm, rhs, chol, theta):
             xb, x2, f2 = x2, x1, f1
             x1 = xa + _GOLDEN * (xb - xa)
             trial[q] = x1
-            f1 = _sse_at(p, centres, trial, anchor, margin, nm, rhs, chol, theta)
+            f1 = _sse_at(p, centres, trial, anchor, margin, nm, rhs, theta)
         else:
             xa, x1, f1 = x1, x2, f2
             x2 = xb - _GOLDEN * (xb - xa)
             trial[q] = x2
-            f2 = _sse_at(p, centres, trial, anchor, margin, nm, rhs, chol, theta)
+            f2 = _sse_at(p, centres, trial, anchor, margin, nm, rhs, theta)
     trial[q] = 0.5 * (xa + xb)
-    return trial[q], _sse_at(p, centres, trial, anchor, margin, nm, rhs, chol, theta)
+    return trial[q], _sse_at(p, centres, trial, anchor, margin, nm, rhs, theta)
 
 
 @njit(cache=True, nogil=True)
@@ -220,23 +276,50 @@ def _search(p, centres, cand, cand_k, coarse, anchor, margin, n_refine_sweeps):
     """
     nm = np.zeros((4, 4))
     rhs = np.zeros(4)
-    chol = np.zeros((4, 4))
     theta = np.zeros(4)
     n_c = coarse.shape[0]
     best = np.inf
     idx = np.zeros(4, dtype=np.int64)
-    # 1. exhaustive coarse search over ordered 4-tuples
+    # 1. exhaustive coarse search over ordered 4-tuples. The same sums as _solve_sse for each
+    # tuple, in the same order, but the terms of the segments left of the inner loops' breakpoints
+    # are added once per outer loop (nm_ab: segments A, B; nm_abc: + C) and copied, and a tuple
+    # the anchor rejects (X1 = b2, X2 = b3) is skipped before its inner loops: the same SSEs.
+    nm_ab = np.zeros((4, 4))
+    rhs_ab = np.zeros(4)
+    nm_abc = np.zeros((4, 4))
+    rhs_abc = np.zeros(4)
+    n_bins = p.shape[1] - 1
+    check_anchor = anchor == anchor  # a NaN anchor disables the constraint
     for a in range(n_c):
         ga = coarse[a]
+        b1, k1 = cand[ga], cand_k[ga]
         for b in range(a + 1, n_c):
             gb = coarse[b]
+            b2, k2 = cand[gb], cand_k[gb]
+            if check_anchor and not b2 <= anchor - margin:
+                continue
+            for r in range(4):
+                rhs_ab[r] = 0.0
+                for s in range(4):
+                    nm_ab[r, s] = 0.0
+            _add_segment(nm_ab, rhs_ab, p, 0, k1, 1.0, 0.0, 0.0, 0.0, 0)
+            _add_segment(nm_ab, rhs_ab, p, k1, k2, 1.0, -b1, 0.0, 0.0, 1)
             for c in range(b + 1, n_c):
                 gc = coarse[c]
+                b3, k3 = cand[gc], cand_k[gc]
+                if check_anchor and not b3 >= anchor + margin:
+                    continue
+                nm_abc[:, :] = nm_ab
+                rhs_abc[:] = rhs_ab
+                _add_segment(nm_abc, rhs_abc, p, k2, k3, 1.0, b2 - b1, -b2, 0.0, 2)
                 for d in range(c + 1, n_c):
                     gd = coarse[d]
-                    sse = _solve_sse(p, cand[ga], cand[gb], cand[gc], cand[gd], cand_k[ga],
-                                     cand_k[gb], cand_k[gc], cand_k[gd], anchor, margin,
-                                     nm, rhs, chol, theta)
+                    b4, k4 = cand[gd], cand_k[gd]
+                    nm[:, :] = nm_abc
+                    rhs[:] = rhs_abc
+                    _add_segment(nm, rhs, p, k3, k4, 1.0, b2 - b1, b3 - b2, -b3, 3)
+                    _add_segment(nm, rhs, p, k4, n_bins, 1.0, b2 - b1, b3 - b2, b4 - b3, 0)
+                    sse = _finish_sse(p, b1, b2, b3, b4, k1, k2, k3, k4, nm, rhs, theta)
                     if sse < best:
                         best = sse
                         idx[0], idx[1], idx[2], idx[3] = ga, gb, gc, gd
@@ -258,7 +341,7 @@ def _search(p, centres, cand, cand_k, coarse, anchor, margin, n_refine_sweeps):
                 sse = _solve_sse(p, cand[trial[0]], cand[trial[1]], cand[trial[2]],
                                  cand[trial[3]], cand_k[trial[0]], cand_k[trial[1]],
                                  cand_k[trial[2]], cand_k[trial[3]], anchor, margin,
-                                 nm, rhs, chol, theta)
+                                 nm, rhs, theta)
                 if sse < best * (1.0 - 1e-13):
                     best = sse
                     idx[q] = g
@@ -281,14 +364,14 @@ def _search(p, centres, cand, cand_k, coarse, anchor, margin, n_refine_sweeps):
                 lo = bp[q - 1]
             if q < 3 and hi > bp[q + 1]:
                 hi = bp[q + 1]
-            xm, fm = _golden(p, centres, bp, q, lo, hi, anchor, margin, nm, rhs, chol, theta)
+            xm, fm = _golden(p, centres, bp, q, lo, hi, anchor, margin, nm, rhs, theta)
             if fm < best:
                 best = fm
                 moved_by = max(moved_by, abs(xm - bp[q]))
                 bp[q] = xm
         if moved_by < 1e-9:
             break
-    best = _sse_at(p, centres, bp, anchor, margin, nm, rhs, chol, theta)
+    best = _sse_at(p, centres, bp, anchor, margin, nm, rhs, theta)
     return bp, theta.copy(), best
 
 
@@ -297,7 +380,6 @@ def _profile_interval(p, centres, bp, q, lo, hi, step, threshold, anchor, margin
     """Range of breakpoint ``q`` over [lo, hi] (grid ``step``) where SSE <= threshold."""
     nm = np.zeros((4, 4))
     rhs = np.zeros(4)
-    chol = np.zeros((4, 4))
     theta = np.zeros(4)
     trial = bp.copy()
     first = np.inf
@@ -306,7 +388,7 @@ def _profile_interval(p, centres, bp, q, lo, hi, step, threshold, anchor, margin
     for j in range(n_steps + 1):
         value = min(lo + j * step, hi)
         trial[q] = value
-        if _sse_at(p, centres, trial, anchor, margin, nm, rhs, chol, theta) <= threshold:
+        if _sse_at(p, centres, trial, anchor, margin, nm, rhs, theta) <= threshold:
             first = min(first, value)
             last = max(last, value)
     if first > last:  # not even the optimum passes (rounding): a point interval

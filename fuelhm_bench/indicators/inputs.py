@@ -180,6 +180,21 @@ def validate_flight(time_s: object, current_ma: object, position_mm: object, *,
     n = len(arrays[0])
     if n < window:
         raise DataFormatError(too_short_message(n, window, flight_id))
+    from fuelhm_bench.indicators.kernel import check_chunk  # numba: imported when first needed
+
+    t, i, x = arrays
+    # One compiled pass (no temporaries) finds whether anything is wrong; only then do the
+    # NumPy checks below run, to name the first problem of each kind in the message.
+    if check_chunk(t, i, x, 0.0, False)[0] != 0:
+        _raise_first_problem(arrays, flight_id)
+    if i.min() == i.max():
+        raise DataFormatError(constant_current_message(float(i[0]), n, flight_id))
+    return t, i, x
+
+
+def _raise_first_problem(arrays: tuple[np.ndarray, ...], flight_id: object) -> None:
+    """Raise the :class:`DataFormatError` of a flight's first non-finite value or time step that does not
+    increase (non-finite values first, array by array)."""
     for arr, name in zip(arrays, ARRAY_NAMES):
         bad = ~np.isfinite(arr)
         if bad.any():
@@ -187,11 +202,9 @@ def validate_flight(time_s: object, current_ma: object, position_mm: object, *,
             raise DataFormatError(
                 nonfinite_message(name, idx, float(arr[idx]), int(bad.sum()), flight_id)
             )
-    t, i, x = arrays
+    t = arrays[0]
     steps = np.diff(t)
     if not (steps > 0).all():
         idx = int(np.argmax(~(steps > 0))) + 1
         raise DataFormatError(time_order_message(idx, float(t[idx - 1]), float(t[idx]), flight_id))
-    if i.min() == i.max():
-        raise DataFormatError(constant_current_message(float(i[0]), n, flight_id))
-    return t, i, x
+    raise AssertionError("unreachable: the compiled check found a problem the NumPy checks do not")

@@ -53,8 +53,30 @@ def accumulate(t, cur, x, n2, c_start, c_stop, h, low, inv_w, width, n_bins, x_l
     ``curve.COUNTER_NAMES``. An idle candidate whose centre sample has ``n2 < n2_low`` (%)
     also enters the low-pressure band rows 0-3 of ``band_acc``, one with ``n2 >= n2_high``
     the high-pressure rows 4-7, at cell ``b // cell_bins`` (a NaN N2 enters neither).
+
+    The default half-width (2) runs a copy of the loop compiled with ``h`` a constant, so
+    that the window loops are unrolled (about a quarter faster; the same operations in the
+    same order, so the same bits).
     """
+    if h == 2:
+        _accumulate(t, cur, x, n2, c_start, c_stop, 2, low, inv_w, width, n_bins, x_low, x_high,
+                    i_low, i_high, max_frame, max_rate, v_idle, n2_low, n2_high, cell_bins, cell_w,
+                    acc, counters, band_acc)
+    else:
+        _accumulate(t, cur, x, n2, c_start, c_stop, h, low, inv_w, width, n_bins, x_low, x_high,
+                    i_low, i_high, max_frame, max_rate, v_idle, n2_low, n2_high, cell_bins, cell_w,
+                    acc, counters, band_acc)
+
+
+@njit(nogil=True, inline="always")
+def _accumulate(t, cur, x, n2, c_start, c_stop, h, low, inv_w, width, n_bins, x_low, x_high,
+                i_low, i_high, max_frame, max_rate, v_idle, n2_low, n2_high, cell_bins, cell_w,
+                acc, counters, band_acc):
+    """The loop of :func:`accumulate` (inlined into it, once per case of ``h``)."""
     n_w = float(2 * h + 1)
+    cell_of = np.empty(n_bins, np.int64)  # b // cell_bins, looked up (an integer division per sample is slow)
+    for b in range(n_bins):
+        cell_of[b] = b // cell_bins
     for c in range(c_start, c_stop):
         tc = t[c]
         xc = x[c]
@@ -125,7 +147,7 @@ def accumulate(t, cur, x, n2, c_start, c_stop, h, low, inv_w, width, n_bins, x_l
             elif nc >= n2_high:
                 r = 4
             if r >= 0:
-                j = b // cell_bins
+                j = cell_of[b]
                 dc = i - (low + (j + 0.5) * cell_w)
                 band_acc[r, j] += 1.0
                 band_acc[r + 1, j] += dc
