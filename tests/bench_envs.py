@@ -42,10 +42,16 @@ def test_surrogate_throughput(benchmark):
     env = gym.make("FuelHM/ActuationLoop-v3", scenario="all_modes", fidelity="surrogate")
     _episodes(env, 5)
     n_episodes = 200
-    flights = benchmark.pedantic(_episodes, args=(env, n_episodes), rounds=5, iterations=1)
+    # 15 rounds of ~0.1 s: on a shared VM one round's CPU time varies by up to 2x with the neighbours (the
+    # same 200 episodes measured 39k-72k flights/s in one process), so the best round is the estimate of
+    # what the code costs, as timeit recommends; the median is printed next to it.
+    flights = benchmark.pedantic(_episodes, args=(env, n_episodes), rounds=15, iterations=1)
     rate = flights / benchmark.stats.stats.min
+    median = flights / benchmark.stats.stats.median
     benchmark.extra_info["surrogate_flights_per_s"] = rate
-    print(f"\nsurrogate: {rate:,.0f} flights/s ({1e6 / rate:.1f} us per flight, resets included)")
+    benchmark.extra_info["surrogate_flights_per_s_median"] = median
+    print(f"\nsurrogate: {rate:,.0f} flights/s ({1e6 / rate:.1f} us per flight, resets included; "
+          f"median round {median:,.0f} flights/s)")
     assert rate >= 50_000, f"surrogate throughput {rate:,.0f} flights/s is below the 50,000 target"
 
 
