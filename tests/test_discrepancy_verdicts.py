@@ -108,6 +108,11 @@ def test_verdict_effect_names_an_lvdt_lag_of_altsim_data():
                                                   for c in r.ranking]
     assert r.parameters["time_constant_s"] == pytest.approx(0.05, rel=0.25)
     assert r.effect_set[0].share == pytest.approx(1.0) or len(r.effect_set) > 1
+    # The named parameter comes with an approximate interval around it and its strongest trade-off.
+    iv = r.effect_set[0].intervals["time_constant_s"]
+    assert 0 < iv["low"] < r.parameters["time_constant_s"] < iv["high"] < 0.5
+    assert 0.0 <= iv["max_correlation"] <= 1.0 and ":" in iv["with"]
+    assert json.loads(json.dumps(r.as_json(), default=float))["set"][0]["intervals"]["time_constant_s"]["low"] > 0
     # Early stopping never touches the fits of the named candidate (they gain from the start).
     named = [c for c in r.ranking if c.effect == "lvdt_lag"]
     assert named and not any(c.stopped_early for c in named)

@@ -579,6 +579,9 @@ class SetMember:
         BIC gain of adding it [-].
     share : float
         Its share of the held-out gap closed by the whole set [-].
+    intervals : dict
+        Per fitted effect parameter, :func:`effect_intervals` of its fit: approximate 95 % interval
+        and the recalibration value it trades off against most.
     """
 
     effect: str
@@ -588,13 +591,53 @@ class SetMember:
     gap_after: float
     delta_bic: float
     share: float = float("nan")
+    intervals: dict = field(default_factory=dict)
 
     def as_json(self) -> dict:
         """JSON-ready summary."""
         return {"effect": self.effect,
                 "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")} for k, v in self.parameters.items()},
                 "held_at_nominal": list(self.held), "gap_before": self.gap_before, "gap_after": self.gap_after,
-                "delta_bic": self.delta_bic, "share": self.share}
+                "delta_bic": self.delta_bic, "share": self.share, "intervals": self.intervals}
+
+
+def effect_intervals(fit: JointFit, n_eff: float, z: float = 1.96) -> dict:
+    """Approximate intervals of a fit's effect (shared) parameters, and what they trade off against.
+
+    Local (Wald) intervals from the Jacobian at the solution
+    (:func:`~fuelhm_bench.calibration.fit.identifiability`: residual variance inflated for the
+    residuals' correlation), i.e. what the data determine *under the model's laws*, with every
+    recalibration value free (the trade-offs are in the inverse): a structural mismatch biases the
+    estimate without widening the interval, so an interval that misses a reference value says the
+    data disagree with it under these laws, not that the effect is absent. Log-scaled parameters get
+    an interval symmetric in the logarithm; both ends are clipped to the parameter's range.
+
+    Returns
+    -------
+    dict
+        ``{field: {"low", "high", "max_correlation", "with"}}``: the interval [SI], the largest
+        |correlation| of the estimate with a recalibration value and that value's ``unit:path``.
+    """
+    from fuelhm_bench.calibration.fit import identifiability
+
+    n_unit = len(fit.unit_parameters) * len(fit.unit_values)
+    names = [f"{k}:{path}" for k, path in fit.column_names]
+    ident = identifiability(fit.jacobian, fit.rss, n_eff, names)
+    out = {}
+    for i, p in enumerate(fit.shared_parameters):
+        col = n_unit + i
+        v = float(fit.shared_values[p.path])
+        se = float(ident.std_error_z[col])
+        if not math.isfinite(se):
+            lo, hi = float("nan"), float("nan")
+        else:
+            lo, hi = p.clip(p.from_z(-z * se, v)), p.clip(p.from_z(z * se, v))
+        corr = np.abs(np.nan_to_num(np.asarray(ident.correlation, dtype=float)[col, :n_unit]))
+        j = int(np.argmax(corr)) if n_unit else -1
+        out[p.path.rsplit(".", 1)[-1]] = {"low": lo, "high": hi,
+                                          "max_correlation": float(corr[j]) if n_unit else 0.0,
+                                          "with": names[j] if n_unit else ""}
+    return out
 
 
 @dataclass(frozen=True)
@@ -1163,7 +1206,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         for path in held_paths:
             new_model = new_model.with_parameters({path: start.get(path)})
         members.append(SetMember(best.effect, dict(best.parameters), held_paths, cur["gap"], g_new,
-                                 cur["bic"] - best.bic))
+                                 cur["bic"] - best.bic, intervals=effect_intervals(res, noise.n_eff)))
         say(f"selected {best.label} (round {round_no}): held-out gap {cur['gap']:.3f} -> {g_new:.3f} mm/s")
         cur = {"fit": res, "gap": g_new, "bic": best.bic, "model": new_model, "params": fit_params,
                "held": held_paths}
@@ -1277,5 +1320,5 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "EarlyStop", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
-           "correlation_time", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
+           "correlation_time", "effect_intervals", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
            "best_explanation"]
