@@ -103,7 +103,7 @@ def test_discrepancy_v2_on_12_altsim_flights_of_20_minutes(benchmark, alt_fleet)
           f"verdict {result.verdict}, set {[m.effect for m in result.effect_set]}")
     for c in result.ranking:
         print(f"  {c.label:40s} dBIC {c.delta_bic:10.1f}  held-out gap {c.gap_after:.3f} mm/s  "
-              f"{c.passes} replays  {c.seconds:.1f} s")
+              f"{c.passes} replays  {c.seconds:.1f} s" + ("  (stopped early)" if c.stopped_early else ""))
     # Timing is what this benchmark measures; naming on altsim data is the study's (docs/discrepancy.md
     # section 10). It still must never be a confident wrong effect.
     assert result.verdict in ("effect", "none", "unexplained")

@@ -93,6 +93,11 @@ def test_verdict_none_on_healthy_altsim_data():
     assert r.verdict == "none", (r.unexplained, [(c.label, round(c.delta_bic), round(c.gap_reduction, 2))
                                                  for c in r.ranking])
     assert r.effect == "none" and r.effect_set == () and r.probe is None
+    # Candidates that explain nothing are stopped early (fewer replays), reported as such, never eligible.
+    stopped = [c for c in r.ranking if c.stopped_early]
+    assert stopped and all(not c.eligible and c.delta_bic <= SMALL.bic_threshold for c in stopped)
+    assert {c["effect"] for c in json.loads(json.dumps(r.as_json(), default=float))["ranking"]
+            if c["stopped_early"]} == {c.effect for c in stopped}
 
 
 def test_verdict_effect_names_an_lvdt_lag_of_altsim_data():
@@ -103,6 +108,14 @@ def test_verdict_effect_names_an_lvdt_lag_of_altsim_data():
                                                   for c in r.ranking]
     assert r.parameters["time_constant_s"] == pytest.approx(0.05, rel=0.25)
     assert r.effect_set[0].share == pytest.approx(1.0) or len(r.effect_set) > 1
+    # The named parameter comes with an approximate interval around it and its strongest trade-off.
+    iv = r.effect_set[0].intervals["time_constant_s"]
+    assert 0 < iv["low"] < r.parameters["time_constant_s"] < iv["high"] < 0.5
+    assert 0.0 <= iv["max_correlation"] <= 1.0 and ":" in iv["with"]
+    assert json.loads(json.dumps(r.as_json(), default=float))["set"][0]["intervals"]["time_constant_s"]["low"] > 0
+    # Early stopping never touches the fits of the named candidate (they gain from the start).
+    named = [c for c in r.ranking if c.effect == "lvdt_lag"]
+    assert named and not any(c.stopped_early for c in named)
 
 
 def test_verdict_unexplained_on_an_effect_outside_the_library():
@@ -161,6 +174,38 @@ def test_forward_selection_names_two_altsim_effects_with_their_shares():
     assert lag.share + play.share == pytest.approx(1.0)
     assert play.gap_after < 0.8 * play.gap_before and play.delta_bic > SMALL.bic_threshold
     assert r.gap_after < 2.0 * r.gap_floor
+
+
+def test_early_stop_drops_a_fit_that_cannot_earn_its_parameters():
+    from fuelhm_bench.calibration.discrepancy import EarlyStop, NoiseModel
+
+    noise = NoiseModel(n=50000, tau=5.0, sigma_mm_s=1.0)
+    ref_rss = 50000.0
+    rule = EarlyStop(noise, noise.bic(ref_rss, 16), 17, 10.0, 12)
+    flat = [ref_rss * (1 - 1e-5 * i) for i in range(6)]           # gains a fraction of a BIC unit per step
+    assert not rule(flat[:4])                                     # too early to judge
+    assert rule(flat)
+    steep = [ref_rss * (1 - 2e-4 * i) for i in range(6)]          # ~2 BIC units per step, 7 steps left
+    assert rule.gain(steep[-1]) < 10.0 and not rule(steep)
+    assert not rule([ref_rss, 0.9 * ref_rss, 0.8 * ref_rss, 0.8 * ref_rss, 0.8 * ref_rss])  # already earned
+    with pytest.raises(ParameterError, match="early_stop"):
+        DiscrepancyConfig(early_stop="yes")
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_fit_task_graph_runs_each_task_after_its_dependencies(n_jobs):
+    import operator
+
+    from fuelhm_bench.calibration.discrepancy import _run_tasks
+
+    seen = []
+    tasks = {"c": (("a", "b"), lambda done: (operator.add, (done["a"], done["b"])), False),
+             "a": ((), lambda done: (operator.mul, (2, 3)), True),
+             "b": (("a",), lambda done: (operator.sub, (done["a"], 1)), False),
+             "d": ((), lambda done: (operator.neg, (4,)), False)}
+    done = _run_tasks(tasks, {}, n_jobs, lambda name, result: seen.append(name))
+    assert done == {"a": 6, "b": 5, "c": 11, "d": -4}
+    assert seen.index("a") < seen.index("b") < seen.index("c") and sorted(seen) == ["a", "b", "c", "d"]
 
 
 def test_plausible_fit_parameters_are_kept_within_the_dispersion():

@@ -39,7 +39,7 @@ import math
 import multiprocessing
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -135,6 +135,12 @@ class DiscrepancyConfig:
     absorbed_z : float, default=5.0
         ... or a value of the final fit at least this many dispersion sigmas from the input model
         (a disagreement absorbed by the recalibration that no candidate explains).
+    early_stop : bool, default=True
+        End a candidate fit early when it cannot earn its parameters (:class:`EarlyStop`): after
+        4 iterations, its BIC gain over its reference, extrapolated generously from its last
+        iterations over the iterations left, stays at or below ``bic_threshold``. Such a candidate
+        cannot be eligible; its outcome (lower bound of what it explains) is reported with
+        ``stopped_early``. False: every fit runs to convergence or ``candidate_iterations``.
     tradeoff_tolerance : float, default=0.1
         A value of a plausible (bounded) final fit sitting at its dispersion limit counts as absorbing
         only if it trades off against the named effect: releasing the limit (the free fit of the
@@ -161,6 +167,7 @@ class DiscrepancyConfig:
     unexplained_score: float = 30.0
     absorbed_z: float = 5.0
     tradeoff_tolerance: float = 0.1
+    early_stop: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_effects, int) or isinstance(self.max_effects, bool) or self.max_effects < 1:
@@ -189,6 +196,8 @@ class DiscrepancyConfig:
                 self.heldout_max_frames, bool) or self.heldout_max_frames < 2000):
             raise range_error("DiscrepancyConfig.heldout_max_frames", "None or an integer >= 2000",
                               self.heldout_max_frames)
+        if not isinstance(self.early_stop, bool):
+            raise range_error("DiscrepancyConfig.early_stop", "True or False", self.early_stop)
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             raise range_error("DiscrepancyConfig.seed", "an integer >= 0", self.seed)
 
@@ -277,6 +286,60 @@ def noise_model(fit: JointFit, sets: dict) -> NoiseModel:
 
 
 @dataclass(frozen=True)
+class EarlyStop:
+    """Early-stopping rule of a candidate fit (``stop`` of :func:`~fuelhm_bench.calibration.fit.fit_joint`).
+
+    A candidate is eligible only if its BIC gain over its reference (the recalibration, or the set
+    so far) exceeds ``threshold``. After ``min_iterations`` iterations, the gain reached so far is
+    extrapolated over the iterations left at ``margin`` times its mean rate over the last
+    ``window`` iterations; if even that stays at or below ``threshold``, the fit is stopped (it is
+    clearly worse: its effect explains nothing the recalibration does not). Fits that gain are
+    never stopped, so the eligible candidates, the verdict and the named parameters are those of
+    the fits run to the end.
+
+    Attributes
+    ----------
+    noise : NoiseModel
+        Noise model of the BIC.
+    ref_bic : float
+        BIC of the reference fit [-].
+    k : int
+        Fitted values of the candidate's fit.
+    threshold : float
+        BIC gain a candidate needs (``DiscrepancyConfig.bic_threshold``) [-].
+    iterations : int
+        Iteration budget of the fit.
+    min_iterations, window : int
+        Iterations before the first check; iterations over which the rate is measured.
+    margin : float
+        Factor on the recent rate of gain.
+    """
+
+    noise: NoiseModel
+    ref_bic: float
+    k: int
+    threshold: float
+    iterations: int
+    min_iterations: int = 4
+    window: int = 3
+    margin: float = 2.0
+
+    def gain(self, rss: float) -> float:
+        """BIC gain over the reference of a fit with this RSS [-]."""
+        return self.ref_bic - self.noise.bic(rss, self.k)
+
+    def __call__(self, history: Sequence[float]) -> bool:
+        done = len(history) - 1  # iterations taken (history[0] is the start point)
+        if done < max(self.min_iterations, self.window):
+            return False
+        now = self.gain(min(history))
+        if now > self.threshold:
+            return False
+        rate = max(0.0, now - self.gain(min(history[:-self.window]))) / self.window
+        return now + self.margin * rate * max(self.iterations - done, 0) <= self.threshold
+
+
+@dataclass(frozen=True)
 class CandidateOutcome:
     """Result of one candidate effect (or of ``none``: recalibration alone).
 
@@ -315,6 +378,8 @@ class CandidateOutcome:
     delta_bic_free, gap_reduction_free : float
         For a bounded fit: BIC gain and held-out gap reduction relative to the *free*
         recalibration (which may absorb the effect into implausible values) [-].
+    stopped_early : bool
+        The fit was ended early by :class:`EarlyStop` (it could not earn its parameters).
     """
 
     effect: str
@@ -333,6 +398,7 @@ class CandidateOutcome:
     bounded: bool = False
     delta_bic_free: float = float("nan")
     gap_reduction_free: float = float("nan")
+    stopped_early: bool = False
 
     @property
     def label(self) -> str:
@@ -351,6 +417,7 @@ class CandidateOutcome:
             "delta_bic_vs_free_recalibration": None if math.isnan(self.delta_bic_free) else self.delta_bic_free,
             "gap_reduction_vs_free_recalibration": (None if math.isnan(self.gap_reduction_free)
                                                    else self.gap_reduction_free),
+            "stopped_early": self.stopped_early,
         }
 
 
@@ -512,6 +579,9 @@ class SetMember:
         BIC gain of adding it [-].
     share : float
         Its share of the held-out gap closed by the whole set [-].
+    intervals : dict
+        Per fitted effect parameter, :func:`effect_intervals` of its fit: approximate 95 % interval
+        and the recalibration value it trades off against most.
     """
 
     effect: str
@@ -521,13 +591,53 @@ class SetMember:
     gap_after: float
     delta_bic: float
     share: float = float("nan")
+    intervals: dict = field(default_factory=dict)
 
     def as_json(self) -> dict:
         """JSON-ready summary."""
         return {"effect": self.effect,
                 "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")} for k, v in self.parameters.items()},
                 "held_at_nominal": list(self.held), "gap_before": self.gap_before, "gap_after": self.gap_after,
-                "delta_bic": self.delta_bic, "share": self.share}
+                "delta_bic": self.delta_bic, "share": self.share, "intervals": self.intervals}
+
+
+def effect_intervals(fit: JointFit, n_eff: float, z: float = 1.96) -> dict:
+    """Approximate intervals of a fit's effect (shared) parameters, and what they trade off against.
+
+    Local (Wald) intervals from the Jacobian at the solution
+    (:func:`~fuelhm_bench.calibration.fit.identifiability`: residual variance inflated for the
+    residuals' correlation), i.e. what the data determine *under the model's laws*, with every
+    recalibration value free (the trade-offs are in the inverse): a structural mismatch biases the
+    estimate without widening the interval, so an interval that misses a reference value says the
+    data disagree with it under these laws, not that the effect is absent. Log-scaled parameters get
+    an interval symmetric in the logarithm; both ends are clipped to the parameter's range.
+
+    Returns
+    -------
+    dict
+        ``{field: {"low", "high", "max_correlation", "with"}}``: the interval [SI], the largest
+        |correlation| of the estimate with a recalibration value and that value's ``unit:path``.
+    """
+    from fuelhm_bench.calibration.fit import identifiability
+
+    n_unit = len(fit.unit_parameters) * len(fit.unit_values)
+    names = [f"{k}:{path}" for k, path in fit.column_names]
+    ident = identifiability(fit.jacobian, fit.rss, n_eff, names)
+    out = {}
+    for i, p in enumerate(fit.shared_parameters):
+        col = n_unit + i
+        v = float(fit.shared_values[p.path])
+        se = float(ident.std_error_z[col])
+        if not math.isfinite(se):
+            lo, hi = float("nan"), float("nan")
+        else:
+            lo, hi = p.clip(p.from_z(-z * se, v)), p.clip(p.from_z(z * se, v))
+        corr = np.abs(np.nan_to_num(np.asarray(ident.correlation, dtype=float)[col, :n_unit]))
+        j = int(np.argmax(corr)) if n_unit else -1
+        out[p.path.rsplit(".", 1)[-1]] = {"low": lo, "high": hi,
+                                          "max_correlation": float(corr[j]) if n_unit else 0.0,
+                                          "with": names[j] if n_unit else ""}
+    return out
 
 
 @dataclass(frozen=True)
@@ -672,35 +782,40 @@ def heldout_models(unit_models: dict, fleet, held_sets: dict) -> dict:
     return {k: unit_models.get(k, fleet) for k in held_sets}
 
 
-def _fit_candidate(cand: EffectCandidate, base: JointFit, fit_sets: dict, held_sets: dict, start_model,
+def _fit_candidate(cand: EffectCandidate, base_values: dict, fit_sets: dict, held_sets: dict, start_model,
                    parameters: tuple, iterations: int, curve: CurveConfig,
-                   extra_start: tuple | None = None) -> tuple[JointFit, float, float]:
+                   extra_start: tuple | None = None,
+                   stop: EarlyStop | None = None) -> tuple[JointFit, float, float]:
     """Multi-start grid, joint fit, held-out gap. Returns (fit, held-out gap, seconds).
 
     Start points: every grid point of the effect, combined with two sets of unit values --
     the recalibrated ones (which may have drifted to mimic the missing effect) and the input
     model's -- plus ``extra_start`` (unit values, effect values), e.g. the free fit of the same
     candidate for a fit kept within the dispersion. Unit values are clipped to the parameters'
-    limits. The fit starts from the combination with the lowest RSS.
+    limits. The fit starts from the combination with the lowest RSS. ``stop``: early-stopping rule
+    (its ``k`` is set here).
     """
     t0 = time.perf_counter()
-    origin = {k: {p.path: float(start_model.get(p.path)) for p in parameters} for k in base.unit_models}
-    starts = [(uv, cand.start_values(point)) for uv in (base.unit_values, origin) for point in cand.grid]
+    origin = {k: {p.path: float(start_model.get(p.path)) for p in parameters} for k in base_values}
+    starts = [(uv, cand.start_values(point)) for uv in (base_values, origin) for point in cand.grid]
     if extra_start is not None:
         starts.append((extra_start[0], {**cand.start_values({}), **extra_start[1]}))
     best = None
     for unit_values, values in starts:
         unit_values = {k: {p.path: p.clip(float(unit_values[k][p.path])) for p in parameters}
-                       for k in base.unit_models}
-        units = {k: apply_values(start_model, unit_values[k]) for k in base.unit_models}
+                       for k in base_values}
+        units = {k: apply_values(start_model, unit_values[k]) for k in base_values}
         models = {k: _with_effect(m, cand, values) for k, m in units.items()}
         rss = _rss(models, fit_sets)
         if best is None or rss < best[0]:
             best = (rss, values, unit_values, models)
     _, values, unit_values, models = best
     shared_start = {p.path: models[next(iter(models))].get(p.path) for p in cand.parameters}
+    if stop is not None:
+        stop = dataclasses.replace(stop, k=len(base_values) * len(parameters) + len(cand.parameters),
+                                   iterations=iterations)
     res = fit_joint(models, fit_sets, parameters, cand.parameters, unit_start=unit_values,
-                    shared_start=shared_start, max_iterations=iterations, broyden=BROYDEN)
+                    shared_start=shared_start, max_iterations=iterations, broyden=BROYDEN, stop=stop)
     fleet = apply_values(_with_effect(start_model, cand, cand.start_values({})),
                          {**fleet_values(res.unit_values, parameters), **res.shared_values})
     hm = heldout_models(res.unit_models, fleet, held_sets)
@@ -711,42 +826,88 @@ def _fit_candidate(cand: EffectCandidate, base: JointFit, fit_sets: dict, held_s
 
 _WORKER: dict = {}
 
+#: Candidates whose replays solve the rod force balance at every frame (direct mode): the slowest
+#: fits, started first so that the workers finish close together.
+_SLOW = ("rod_friction", "load_stiffness")
+
 
 def _worker_init(payload: dict) -> None:  # pragma: no cover - runs in worker processes
     _WORKER.update(payload)
 
 
-def _worker_task(effect: str):  # pragma: no cover - runs in worker processes
-    w = _WORKER
+def _task_candidate(effect: str, overrides: dict):
+    """One candidate fit on the shared payload (``_WORKER``, or the payload passed in-process) with
+    per-task ``overrides`` (unit start values, parameters, start model, extra start, stop rule)."""
+    w = {**_WORKER, **overrides}
     cand = next(c for c in w["candidates"] if c.effect == effect)
-    res, g, sec = _fit_candidate(cand, w["base"], w["fit_sets"], w["held_sets"], w["start_model"], w["parameters"],
-                                 w["iterations"], w["curve"], w.get("extra_starts", {}).get(effect))
-    return effect, res, g, sec
+    res, g, sec = _fit_candidate(cand, w["unit_values"], w["fit_sets"], w["held_sets"], w["start_model"],
+                                 w["parameters"], w["iterations"], w["curve"], w.get("extra_start"), w.get("stop"))
+    return res, g, sec
 
 
-def _run_candidates(cands: list, payload: dict, n_jobs: int, progress) -> dict:
-    out = {}
-    if n_jobs > 1 and len(cands) > 1 and "fork" in multiprocessing.get_all_start_methods():
+def _task_recalibration(overrides: dict):
+    """A recalibration-only fit (the plausible one, kept within the dispersion) on the shared payload."""
+    w = {**_WORKER, **overrides}
+    return fit_joint({k: w["start_model"] for k in w["fit_sets"]}, w["fit_sets"], w["parameters"],
+                     unit_start=w["unit_start"], max_iterations=w["max_iterations"])
+
+
+def _run_tasks(tasks: dict, payload: dict, n_jobs: int, on_done: Callable | None = None) -> dict:
+    """Run a small graph of fits, in worker processes when ``n_jobs > 1``.
+
+    ``tasks`` maps a name to ``(deps, make, slow)``: ``make(done)`` returns ``(function, args)`` from
+    the results of the tasks named in ``deps`` (``done``: name -> result); a task is submitted as
+    soon as its dependencies are done, slow ones first, so a dependent fit (a plausible fit needs the
+    plausible recalibration and the free fit of the same candidate) never waits for unrelated ones.
+    The results do not depend on ``n_jobs`` (each task is the same computation in any process).
+    ``on_done(name, result)`` is called in the main process as each task finishes.
+    """
+    done: dict = {}
+    order = list(tasks)
+
+    def ready() -> list:
+        out = [n for n in order if n not in done and n not in running and all(d in done for d in tasks[n][0])]
+        return sorted(out, key=lambda n: not tasks[n][2])  # stable: slow ones first
+
+    running: dict = {}
+    if n_jobs > 1 and len(tasks) > 1 and "fork" in multiprocessing.get_all_start_methods():
         ctx = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(max_workers=min(n_jobs, len(cands)), mp_context=ctx, initializer=_worker_init,
+        with ProcessPoolExecutor(max_workers=min(n_jobs, len(tasks)), mp_context=ctx, initializer=_worker_init,
                                  initargs=(payload,)) as pool:
-            # Slowest first (direct-mode effects), so the two workers finish together.
-            order = sorted(cands, key=lambda c: c.effect not in ("rod_friction", "load_stiffness"))
-            futures = [pool.submit(_worker_task, c.effect) for c in order]
-            for fut in futures:
-                effect, res, g, sec = fut.result()
-                out[effect] = (res, g, sec)
-                if progress is not None:
-                    progress(1)
-        return out
-    for cand in cands:
-        res, g, sec = _fit_candidate(cand, payload["base"], payload["fit_sets"], payload["held_sets"],
-                                     payload["start_model"], payload["parameters"], payload["iterations"],
-                                     payload["curve"], payload.get("extra_starts", {}).get(cand.effect))
-        out[cand.effect] = (res, g, sec)
-        if progress is not None:
-            progress(1)
-    return out
+            while len(done) < len(tasks):
+                # Keep at most n_jobs tasks in flight, so a task that becomes ready later (a dependent
+                # fit) is not queued behind every independent one.
+                for name in ready()[:max(0, n_jobs - len(running))]:
+                    fn, args = tasks[name][1](done)
+                    running[name] = pool.submit(fn, *args)
+                if not running:
+                    raise RuntimeError("discrepancy task graph has a cycle")  # pragma: no cover
+                finished, _ = wait(list(running.values()), return_when=FIRST_COMPLETED)
+                for name in [n for n, f in running.items() if f in finished]:
+                    done[name] = running.pop(name).result()
+                    if on_done is not None:
+                        on_done(name, done[name])
+        return done
+    _WORKER.clear()
+    _WORKER.update(payload)
+    try:
+        while len(done) < len(tasks):
+            names = ready()
+            if not names:
+                raise RuntimeError("discrepancy task graph has a cycle")  # pragma: no cover
+            fn, args = tasks[names[0]][1](done)
+            done[names[0]] = fn(*args)
+            if on_done is not None:
+                on_done(names[0], done[names[0]])
+    finally:
+        _WORKER.clear()
+    return done
+
+
+def _candidate_tasks(cands: list, overrides, deps=lambda effect: (), prefix: str = "") -> dict:
+    """Tasks of :func:`_run_tasks` fitting every candidate; ``overrides(effect, done)`` builds its overrides."""
+    return {prefix + c.effect: (deps(c.effect), (lambda done, e=c.effect: (_task_candidate, (e, overrides(e, done)))),
+                                c.effect in _SLOW) for c in cands}
 
 
 # --------------------------------------------------------------------------- decision
@@ -882,19 +1043,63 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     if progress is not None:
         progress(1)
 
-    payload = {"candidates": cands, "base": base, "fit_sets": fit_sets, "held_sets": held_sets,
-               "start_model": start, "parameters": params, "iterations": config.candidate_iterations,
-               "curve": cal.curve}
-    results = _run_candidates(cands, payload, config.n_jobs, progress)
+    payload = {"candidates": cands, "fit_sets": fit_sets, "held_sets": held_sets, "start_model": start,
+               "parameters": params, "iterations": config.candidate_iterations, "curve": cal.curve}
+
+    def stop_rule(ref_bic: float) -> EarlyStop | None:
+        return (EarlyStop(noise, ref_bic, 0, config.bic_threshold, config.candidate_iterations)
+                if config.early_stop else None)
+
+    def bounded_tasks(free_base: JointFit, free_results: dict | None) -> dict:
+        """The plausible recalibration (kept within absorbed_z sigmas, started from ``free_base`` clipped) and
+        the plausible fit of every candidate (started also from the free fit of the same candidate)."""
+        b_params = within_dispersion(params, start, config.absorbed_z)
+        b_start = {k: {p.path: p.clip(float(v[p.path])) for p in b_params}
+                   for k, v in free_base.unit_values.items()}
+
+        def over(effect: str, done: dict) -> dict:
+            b = done["recalibration:bounded"]
+            res = done[effect][0] if free_results is None else free_results[effect][0]
+            return {"unit_values": b.unit_values, "parameters": b_params,
+                    "stop": stop_rule(noise.bic(b.rss, b.n_parameters)),
+                    "extra_start": (res.unit_values,
+                                    {k.rsplit(".", 1)[-1]: v for k, v in res.shared_values.items()})}
+
+        out = {"recalibration:bounded": ((), lambda done: (_task_recalibration, (
+            {"parameters": b_params, "unit_start": b_start, "max_iterations": cal.max_iterations},)), True)}
+        out.update(_candidate_tasks(cands, over, prefix="bounded:", deps=lambda e: (
+            ("recalibration:bounded",) if free_results is not None else ("recalibration:bounded", e))))
+        return out
+
+    def needs_bounded(fit: JointFit) -> bool:
+        return bool(config.hold_flagged and absorbing_parameters(fit.unit_values, start, z_max=config.absorbed_z))
+
+    # First round: every candidate on top of the free recalibration and, when the recalibration absorbs
+    # (values beyond absorbed_z sigmas), the plausible fits too, in one task graph (the plausible
+    # recalibration runs alongside the free candidates).
+    stop0 = stop_rule(noise.bic(base.rss, base.n_parameters))
+    tasks = _candidate_tasks(cands, lambda e, done, uv=base.unit_values: {"unit_values": uv, "stop": stop0})
+    if needs_bounded(base):
+        tasks = {**bounded_tasks(base, None), **tasks}
+    free_names = {c.effect for c in cands}
+
+    def tick(name: str, _result) -> None:
+        if progress is not None and name in free_names:
+            progress(1)
+
+    done = _run_tasks(tasks, payload, config.n_jobs, tick)
+    results = {c.effect: done[c.effect] for c in cands}
 
     # The recalibration alone may have stopped in a poorer local minimum than one a candidate's fit
     # wandered into (the recalibration parameters try to mimic a missing effect). Score the
     # recalibration values of every candidate fit with the effect off, restart the recalibration
     # from the best of them, and keep the better fit, so that every candidate is compared with
-    # the best recalibration-only fit found (nested models).
-    if results:
+    # the best recalibration-only fit found (nested models). Fits stopped early (EarlyStop) are left
+    # out: theirs are the unit values of an unfinished fit of a candidate that explains nothing.
+    finished = {eff: r for eff, r in results.items() if r[0].message != "stopped early"}
+    if finished:
         scored = []
-        for eff, (res, _, _) in results.items():
+        for eff, (res, _, _) in finished.items():
             models = {k: apply_values(start, res.unit_values[k]) for k in fit_sets}
             scored.append((_rss(models, fit_sets), eff))
         rss_best, eff_best = min(scored)
@@ -932,12 +1137,14 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                          "gap_reduction_free": 1.0 - g / free[1] if free[1] > 0 else 0.0}
             oc = CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, ref_bic - bic, res.rss,
                                   g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag,
-                                  bounded=bounded or cur_bounded[0], **extra)
+                                  bounded=bounded or cur_bounded[0], stopped_early=res.message == "stopped early",
+                                  **extra)
             label = oc.label
             fits[(tag, label)] = (res, g, cand, held_paths, fit_params)
             out.append(oc)
             say(f"candidate {label}: dBIC {ref_bic - bic:.1f}, held-out gap {g:.3f} mm/s ({100 * red:+.0f} %), "
-                f"{res.passes} replays, {sec:.1f} s")
+                f"{res.passes} replays, {sec:.1f} s" + (" (stopped early: cannot earn its parameters)"
+                                                          if oc.stopped_early else ""))
         return out
 
     outcomes += collect(results, (), params, bic0, g_recal, "1")
@@ -952,12 +1159,13 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     if flags:
         say("recalibrated values outside the dispersion: " + "; ".join(
             f"unit {f.unit}: {f.path} {f.z:+.1f} sigma" for f in flags))
-    bounded_ref = None
-    if config.hold_flagged and absorbing_parameters(base.unit_values, start, z_max=config.absorbed_z):
-        b_params = within_dispersion(params, start, config.absorbed_z)
-        b_start = {k: {p.path: p.clip(float(v[p.path])) for p in b_params} for k, v in base.unit_values.items()}
-        b_base = fit_joint({k: start for k in fit_sets}, fit_sets, b_params, unit_start=b_start,
-                           max_iterations=cal.max_iterations)
+    if needs_bounded(base):
+        # The plausible fits ran alongside the free candidates, started from the first recalibration (a
+        # restart above moves the free recalibration by little; the plausible one is refitted anyway).
+        if "recalibration:bounded" not in done:  # only the restarted recalibration absorbs
+            done = _run_tasks(bounded_tasks(base, results), payload, config.n_jobs)
+        b_base = done["recalibration:bounded"]
+        b_params = b_base.unit_parameters
         b_fleet = apply_values(start, fleet_values(b_base.unit_values, b_params))
         g_b = gap(held, held_velocity(heldout_models(b_base.unit_models, b_fleet, held_sets)), cal.curve)
         bic_b = noise.bic(b_base.rss, b_base.n_parameters)
@@ -966,16 +1174,10 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         outcomes.append(CandidateOutcome("none", {}, bic_b, bic0 - bic_b, b_base.rss, g_b,
                                          1.0 - g_b / g_recal if g_recal > 0 else 0.0, False, b_base.passes, 0.0,
                                          b_base.unit_values, bounded=True))
-        # Extra start of each plausible fit: the free fit of the same candidate (its effect values, its unit
-        # values clipped into the dispersion band).
-        extra = {eff: (res.unit_values, {k.rsplit(".", 1)[-1]: v for k, v in res.shared_values.items()})
-                 for eff, (res, _, _) in results.items()}
-        payload_b = {**payload, "base": b_base, "parameters": b_params, "extra_starts": extra}
-        results_b = _run_candidates(cands, payload_b, config.n_jobs, None)
+        results_b = {c.effect: done["bounded:" + c.effect] for c in cands}
         cur_bounded[0] = True
         outcomes += collect(results_b, (), b_params, bic_b, g_b, "1", bounded=True, free=(bic0, g_recal))
         cur_bounded[0] = False
-        bounded_ref = (b_base, b_fleet, g_b, bic_b, b_params)
 
     rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_gap_reduction}
     outcomes = [dataclasses.replace(c, eligible=is_eligible(c, **rule)) for c in outcomes]
@@ -1004,7 +1206,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         for path in held_paths:
             new_model = new_model.with_parameters({path: start.get(path)})
         members.append(SetMember(best.effect, dict(best.parameters), held_paths, cur["gap"], g_new,
-                                 cur["bic"] - best.bic))
+                                 cur["bic"] - best.bic, intervals=effect_intervals(res, noise.n_eff)))
         say(f"selected {best.label} (round {round_no}): held-out gap {cur['gap']:.3f} -> {g_new:.3f} mm/s")
         cur = {"fit": res, "gap": g_new, "bic": best.bic, "model": new_model, "params": fit_params,
                "held": held_paths}
@@ -1017,9 +1219,9 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             say(f"held-out gap {g_new:.3f} mm/s within {config.continue_ratio:g}x its noise floor "
                 f"({floor_cur:.3f}): no further effect searched")
             break
-        payload_k = {**payload, "candidates": remaining, "base": res, "start_model": new_model,
-                     "parameters": fit_params}
-        results_k = _run_candidates(remaining, payload_k, config.n_jobs, None)
+        over_k = {"unit_values": res.unit_values, "start_model": new_model, "parameters": fit_params,
+                  "stop": stop_rule(best.bic)}
+        results_k = _run_tasks(_candidate_tasks(remaining, lambda e, done, o=over_k: o), payload, config.n_jobs)
         tag = str(round_no + 1)
         round_outcomes = collect({k: v for k, v in results_k.items()}, held_paths, fit_params, best.bic, g_new, tag)
         round_rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_step_reduction}
@@ -1116,7 +1318,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         equivalents=tuple(equivalents), flags=flags, unexplained=unexplained, probe=probe)
 
 
-__all__ = ["CandidateOutcome", "DiscrepancyConfig", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
+__all__ = ["CandidateOutcome", "DiscrepancyConfig", "EarlyStop", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
-           "correlation_time", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
+           "correlation_time", "effect_intervals", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
            "best_explanation"]

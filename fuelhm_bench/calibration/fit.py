@@ -176,6 +176,10 @@ class JointFit:
         return self.jacobian.shape[1]
 
 
+class _StopFit(Exception):
+    """Raised inside the solver when the ``stop`` rule of :func:`fit_joint` ends a fit early (internal)."""
+
+
 class _Problem:
     """Residuals and grouped finite-difference Jacobian of a joint fit (internal)."""
 
@@ -216,6 +220,9 @@ class _Problem:
         self.refresh_every = 4
         self._last: tuple | None = None
         self._since_refresh = 0
+        self.stop: Callable[[Sequence[float]], bool] | None = None
+        self.history: list[float] = []  # RSS at each iterate where a Jacobian was asked for
+        self.stopped_at: np.ndarray | None = None
 
     def unit_z(self, z: np.ndarray, u: int) -> np.ndarray:
         return z[u * self.n_u:(u + 1) * self.n_u]
@@ -273,6 +280,10 @@ class _Problem:
 
     def jac(self, z: np.ndarray) -> np.ndarray:
         r0 = self.fun(z)
+        self.history.append(float(r0 @ r0))
+        if self.stop is not None and self._last is not None and self.stop(tuple(self.history)):
+            self.stopped_at = z.copy()
+            raise _StopFit
         p = z.shape[0]
         n_units = len(self.keys)
         unit_groups = [[u * self.n_u + j for u in range(n_units)] for j in range(self.n_u)]
@@ -305,7 +316,8 @@ def fit_joint(models: Mapping[Hashable, object], sets: Mapping[Hashable, rp.Repl
               unit_parameters: Sequence[FitParameter], shared_parameters: Sequence[FitParameter] = (), *,
               unit_start: Mapping[Hashable, Mapping[str, float]] | None = None,
               shared_start: Mapping[str, float] | None = None, max_iterations: int = 25, diff_step: float = 0.05,
-              broyden: bool = False, progress: Callable[[int], None] | None = None) -> JointFit:
+              broyden: bool = False, progress: Callable[[int], None] | None = None,
+              stop: Callable[[Sequence[float]], bool] | None = None) -> JointFit:
     """Fit per-unit and shared parameters to the replayed velocities (bounded least squares).
 
     Parameters
@@ -334,6 +346,11 @@ def fit_joint(models: Mapping[Hashable, object], sets: Mapping[Hashable, rp.Repl
         then costs ``p_shared`` replays instead of ``p_unit + p_shared``.
     progress : callable, optional
         Called with 1 after every replay of all units.
+    stop : callable, optional
+        Early stopping: called at every iterate after the first (before its Jacobian is computed)
+        with the RSS of the iterates so far [(mm/s)^2]; when it returns True the fit ends at that
+        iterate (``success`` False, ``message`` "stopped early"; ``jacobian`` is then the one of the
+        previous iterate). Used to drop a candidate that cannot earn its parameters.
 
     Returns
     -------
@@ -359,6 +376,7 @@ def fit_joint(models: Mapping[Hashable, object], sets: Mapping[Hashable, rp.Repl
                                      else shared_start[p.path])) for p in shared_params}
     prob = _Problem(models, sets, unit_params, shared_params, u_start, s_start, diff_step, progress)
     prob.broyden = bool(broyden)
+    prob.stop = stop
     z0 = np.clip(np.zeros(prob.lo.shape[0]), prob.lo + 1e-9 * (prob.hi - prob.lo), prob.hi - 1e-9 * (prob.hi - prob.lo))
     r0 = prob.fun(z0)
     if np.all(r0 == 1e3):
@@ -367,11 +385,16 @@ def fit_joint(models: Mapping[Hashable, object], sets: Mapping[Hashable, rp.Repl
         zs, success, message, jac = z0, True, "nothing to fit", np.zeros((prob.n, 0))
     else:
         # Tall, thin problem: one BLAS thread is fastest (and safe in worker processes).
-        with threadpool_limits(1):
-            sol = least_squares(prob.fun, z0, jac=prob.jac, bounds=(prob.lo, prob.hi), x_scale=1.0, method="trf",
-                                tr_solver="exact", max_nfev=max_iterations, xtol=1e-3, ftol=1e-5, gtol=1e-8)
-        zs, success, message = sol.x, bool(sol.status > 0), str(sol.message)
-        jac = np.asarray(sol.jac)  # the Jacobian at the last accepted point, i.e. at zs
+        try:
+            with threadpool_limits(1):
+                sol = least_squares(prob.fun, z0, jac=prob.jac, bounds=(prob.lo, prob.hi), x_scale=1.0,
+                                    method="trf", tr_solver="exact", max_nfev=max_iterations, xtol=1e-3, ftol=1e-5,
+                                    gtol=1e-8)
+            zs, success, message = sol.x, bool(sol.status > 0), str(sol.message)
+            jac = np.asarray(sol.jac)  # the Jacobian at the last accepted point, i.e. at zs
+        except _StopFit:
+            zs, success, message = prob.stopped_at, False, "stopped early"
+            jac = prob._last[2]
     r = prob.fun(zs)
     units, shared = prob.values(zs)
     built = prob.build(zs)

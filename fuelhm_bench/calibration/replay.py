@@ -53,6 +53,7 @@ then drawn (seeded) so as to cover the curve evenly (see ``_select``).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -507,15 +508,34 @@ def sensor_rate_filter(model, frame_s: float) -> tuple[np.ndarray, np.ndarray]:
         Numerator and denominator for :func:`scipy.signal.lfilter` (unit DC gain).
     """
     lag = model.effect("lvdt_lag")
-    e = lvdt_discretization(model.lvdt, lag.time_constant_s if lag else 0.0, frame_s)
+    num, den, _ = _rate_filter(model.lvdt, lag.time_constant_s if lag else None, float(frame_s))
+    return num.copy(), den.copy()
+
+
+@functools.lru_cache(maxsize=512)
+def _rate_filter(lvdt, lag_s: float | None, frame_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`sensor_rate_filter` by value (memoised: a fit replays the same LVDT thousands of times),
+    and the normalised filter's steady-state initial conditions per unit input; read-only arrays."""
+    e = lvdt_discretization(lvdt, lag_s if lag_s is not None else 0.0, frame_s)
     e_s, e_du = e[:, :3], e[:, 4]
     ones = np.array([1.0, 0.0, 1.0])
     b_vec = e_du - ones * frame_s
-    c = np.array([0.0, 0.0, 1.0]) if lag else np.array([1.0, 0.0, 0.0])
+    c = np.array([0.0, 0.0, 1.0]) if lag_s is not None else np.array([1.0, 0.0, 0.0])
     c_out = c @ (e_s - np.eye(3)) / frame_s
     d = 1.0 + c @ b_vec / frame_s
     num, den = signal.ss2tf(e_s, b_vec.reshape(3, 1), c_out.reshape(1, 3), np.array([[d]]))
-    return np.asarray(num[0], dtype=float), np.asarray(den, dtype=float)
+    num, den = np.asarray(num[0], dtype=float), np.asarray(den, dtype=float)
+    zi0 = signal.lfilter_zi(num / den[0], den / den[0])
+    for a in (num, den, zi0):
+        a.flags.writeable = False
+    return num, den, zi0
+
+
+@functools.lru_cache(maxsize=16)
+def _window_weights(half_width: int) -> np.ndarray:
+    w = vel.window_weights(half_width)
+    w.flags.writeable = False
+    return w
 
 
 @numba.njit(cache=True)
@@ -607,12 +627,12 @@ def replay_batch(models, sets) -> list[np.ndarray]:
             v_rods[j][idx] = out.true_velocity_m_s
     result = []
     for model, rs, v_rod in zip(models, sets, v_rods):
-        num, den = sensor_rate_filter(model, rs.frame_s)
+        lag = model.effect("lvdt_lag")
+        num, den, zi0 = _rate_filter(model.lvdt, lag.time_constant_s if lag else None, float(rs.frame_s))
         num, den = num / den[0], den / den[0]
-        zi0 = signal.lfilter_zi(num, den)
         v = np.empty(rs.n_frames)
         _sensor_windowed(1e3 * v_rod, rs.starts, rs.lengths, num, den, zi0,
-                         vel.window_weights(rs.config.half_width), rs.config.half_width, v)
+                         _window_weights(rs.config.half_width), rs.config.half_width, v)
         result.append(v)
     return result
 

@@ -202,10 +202,13 @@ def _discrepancy_markdown(result, model_file: str, data_name: str) -> str:
               f"**Missing effect: `{r.effect}`**" + ("" if r.effect == "none" else
               " (" + ", ".join(f"{k} = {v:.4g}" for k, v in r.parameters.items()) + ")"), ""]
     if r.effect_set:
-        lines += ["| set member | parameters | held at nominal | held-out gap before -> after [mm/s] | share of the gap |",
-                  "|---|---|---|---|---|"]
+        lines += ["| set member | parameters | approx. 95 % interval (largest correlation with a unit value) | "
+                  "held at nominal | held-out gap before -> after [mm/s] | share of the gap |",
+                  "|---|---|---|---|---|---|"]
         for m in r.effect_set:
-            lines.append(f"| `{m.effect}` | {', '.join(f'{k}={v:.4g}' for k, v in m.parameters.items())} | "
+            iv = "; ".join(f"{k} {d['low']:.4g}..{d['high']:.4g} ({d['max_correlation']:.2f} with {d['with']})"
+                           for k, d in m.intervals.items()) or "-"
+            lines.append(f"| `{m.effect}` | {', '.join(f'{k}={v:.4g}' for k, v in m.parameters.items())} | {iv} | "
                          f"{', '.join(m.held) or '-'} | {m.gap_before:.3f} -> {m.gap_after:.3f} | "
                          f"{100 * m.share:.0f} % |")
         lines.append("")

@@ -121,8 +121,19 @@ class LoopModel:
         return float(getattr(comp, parts[1]))
 
     def with_parameters(self, values: Mapping[str, float]) -> LoopModel:
-        """Return a model with parameters set by dotted path (validated)."""
+        """Return a model with parameters set by dotted path (validated).
+
+        Consecutive paths of one component are set together (one validation of the component).
+        """
         model = self
+        pending: dict = {}  # component -> {field: value}, flushed when another kind of path comes
+
+        def flush(m):
+            for name, fields in pending.items():
+                m = dataclasses.replace(m, **{name: dataclasses.replace(getattr(m, name), **fields)})
+            pending.clear()
+            return m
+
         for path, value in values.items():
             parts = path.split(".")
             if parts[0] == "effect" and len(parts) == 3:
@@ -131,16 +142,18 @@ class LoopModel:
                     raise UnknownNameError(f"Parameter path '{path}': effect '{parts[1]}' is not enabled in this model.")
                 if parts[2] not in effect_parameters(eff):
                     _bad_path(path)
-                model = model.with_effect(dataclasses.replace(eff, **{parts[2]: float(value)}))
+                model = flush(model).with_effect(dataclasses.replace(eff, **{parts[2]: float(value)}))
                 continue
             if len(parts) != 2 or parts[0] not in COMPONENTS:
                 _bad_path(path)
             comp = getattr(model, parts[0])
             if parts[1] not in {f.name for f in dataclasses.fields(comp)}:
                 _bad_path(path)
+            if parts[0] not in pending and pending:
+                model = flush(model)
             cast = int if parts[1] == "adc_bits" else float
-            model = dataclasses.replace(model, **{parts[0]: dataclasses.replace(comp, **{parts[1]: cast(value)})})
-        return model
+            pending.setdefault(parts[0], {})[parts[1]] = cast(value)
+        return flush(model)
 
     # --------------------------------------------------------- serialisation
     def to_dict(self) -> dict:
