@@ -107,14 +107,6 @@ def test_a_unit_with_an_unknown_fault_is_simulated_with_it_and_labelled():
     assert table.loc[1, "Hys0"] > 5 * clean.loc[1, "Hys0"]
 
 
-def test_surrogate_refuses_a_scenario_with_unknown_faults():
-    from fuelhm_bench.envs.actuation_loop import ActuationLoopEnv
-
-    with pytest.raises(ParameterError, match=r"robustness_drift-v\d+ has faults outside the seven modes "
-                                             r"\(unknown_faults: .*\), which the surrogate cannot draw"):
-        ActuationLoopEnv(scenario="robustness_drift", fidelity="surrogate")
-
-
 # --------------------------------------------------------------------------- scoring
 def _labels() -> pd.DataFrame:
     """Three units x 4 flights: healthy, leaking from flight 2, unknown fault from flight 1."""
