@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fuelhm_bench.errors import ParameterError, ScenarioError
+from fuelhm_bench.errors import ScenarioError
 from fuelhm_bench.flights.fleet import FleetConfig, build_units
 from fuelhm_bench.flights.schedule import UnknownFault
 from fuelhm_bench.scenarios import load_scenario, parse_scenario
