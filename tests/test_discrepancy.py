@@ -62,6 +62,8 @@ def test_names_the_hidden_effect_and_shrinks_the_heldout_gap(effect):
     assert set(c.effect for c in result.ranking) == set(EFFECT_IDS) | {"none"}
 
 
+@pytest.mark.slow  # 14 s; the default run covers the `none` verdict on healthy data of the second simulator
+# (test_discrepancy_verdicts.py::test_verdict_none_on_healthy_altsim_data, 4 s)
 def test_answers_none_without_a_hidden_effect():
     _, flights, _ = _data(None)
     result = find_discrepancy(flights, config=SMALL)

@@ -330,6 +330,8 @@ def test_raw_observation(cache_dir):
 
 
 # --------------------------------------------------------------------------- surrogate vs physics
+@pytest.mark.slow  # 24-30 s of physics and surrogate flights (a statistical run); the default run compares the
+# fidelities at a tiny size (tests/test_fidelity.py) and checks each surrogate part (tests/test_envs_surrogate*.py)
 def test_surrogate_matches_physics_distributions(cache_dir):
     """Per-indicator means and standard deviations of surrogate and physics flights, healthy and degraded.
 
