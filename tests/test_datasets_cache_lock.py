@@ -59,9 +59,9 @@ def _hold_then_fork(entry, child_pid, started):
     os.waitpid(pid, 0)
 
 
-def _take(entry):
+def _take(entry, taken):
     with cache._build_lock(entry):
-        pass
+        taken.set()
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs fork")
@@ -76,10 +76,11 @@ def test_a_process_forked_during_a_build_does_not_keep_the_lock(tmp_path):
     holder.start()
     try:
         assert started.wait(30)
-        taker = ctx.Process(target=_take, args=(entry,))
+        taken = ctx.Event()
+        taker = ctx.Process(target=_take, args=(entry, taken))
         taker.start()
         taker.join(10)
-        ok = taker.exitcode == 0
+        ok = taker.exitcode == 0 and taken.is_set()
         if not ok:
             taker.kill()
             taker.join()

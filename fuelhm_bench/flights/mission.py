@@ -55,26 +55,24 @@ def first_order_filter(x: np.ndarray, gain: float, pole: float, z0: float) -> np
     nothing is contracted or reordered): ``y[k] = pole y[k-1] + gain x[k]``.
     """
     y = np.empty(x.shape[0])
-    a1 = -pole
-    z = z0
-    for k in range(x.shape[0]):
-        xk = x[k]
-        yk = z + gain * xk
-        z = 0.0 * xk - a1 * yk
-        y[k] = yk
+    _first_order_filter_into(x, gain, pole, z0, y, False)
     return y
 
 
 @njit(cache=True, nogil=True)
-def _add_first_order_filter(x: np.ndarray, gain: float, pole: float, z0: float, out: np.ndarray) -> None:
-    """``out += first_order_filter(x, gain, pole, z0)`` in one pass, without the filtered array (the same bits)."""
+def _first_order_filter_into(x: np.ndarray, gain: float, pole: float, z0: float, out: np.ndarray,
+                             accumulate: bool) -> None:
+    """``out[:] = first_order_filter(...)``, or ``out += first_order_filter(...)`` with ``accumulate``, in one pass."""
     a1 = -pole
     z = z0
     for k in range(x.shape[0]):
         xk = x[k]
         yk = z + gain * xk
         z = 0.0 * xk - a1 * yk
-        out[k] = out[k] + yk
+        if accumulate:
+            out[k] = out[k] + yk
+        else:
+            out[k] = yk
 
 
 @njit(cache=True, nogil=True)
@@ -269,7 +267,7 @@ class MissionProfile:
             b = np.exp(-T / self.n2_noise_time_constant_s)
             drive = rng.normal(0.0, self.n2_noise_std * np.sqrt(1.0 - b * b), n - n_start)
             start = b * rng.normal(0.0, self.n2_noise_std)  # stationary initial state
-            _add_first_order_filter(drive, 1.0, float(b), float(start), target[n_start:])
+            _first_order_filter_into(drive, 1.0, float(b), float(start), target[n_start:], True)
         # HP spool: first-order lag behind the speed demand (exact discrete update).
         a = np.exp(-T / self.engine_time_constant_s)
         n2 = first_order_filter(target, float(1 - a), float(a), float(a * target[0]))
