@@ -141,3 +141,26 @@ def test_false_alarms_cli_rejects_a_negative_number_of_splits(capsys):
         main(["paper_2012", "--splits", "-1"])
     assert info.value.code == 2
     assert "--splits must be an int >= 0. Got -1 instead." in capsys.readouterr().err
+
+
+def test_ideal_calibration_rate_is_set_by_the_score_shape():
+    """mu + 2 sigma of a score's own sample: 2.3 % for a Gaussian, about 2.9 % for the chi distribution of
+    ten Gaussian indicators' Mahalanobis distance, more for a heavier right tail (a lognormal score)."""
+    from scipy import stats
+
+    from fuelhm_bench.benchmark.false_alarms import ideal_calibration_rate
+    from fuelhm_bench.errors import DataFormatError, ParameterError
+
+    rng = np.random.default_rng(0)
+    gauss = rng.standard_normal(400_000)
+    chi10 = np.sqrt(rng.chisquare(10, 400_000))
+    heavy = rng.lognormal(0.0, 0.6, 400_000)
+    assert abs(ideal_calibration_rate(gauss) - stats.norm.sf(2.0)) < 0.001
+    expected_chi = stats.chi.sf(stats.chi.mean(10) + 2 * stats.chi.std(10), 10)
+    assert abs(ideal_calibration_rate(chi10) - expected_chi) < 0.001 and 0.027 < expected_chi < 0.030
+    assert ideal_calibration_rate(heavy) > expected_chi + 0.005
+    assert ideal_calibration_rate(gauss, a=0) > 0.49
+    with pytest.raises(ParameterError, match="'a' parameter of ideal_calibration_rate must be a number >= 0"):
+        ideal_calibration_rate(gauss, a=-1)
+    with pytest.raises(DataFormatError, match="at least 2 finite scores"):
+        ideal_calibration_rate([1.0, np.nan])
