@@ -93,14 +93,16 @@ def test_many_calibration_units_put_the_false_alarm_rate_near_the_gaussian_tail(
 def test_healthy_false_alarm_rate_at_a2_is_gaussian(name):
     """The paper method's threshold mu + 2 sigma, set on the calibration half of the healthy training units,
     gives a healthy false-alarm rate within 1.5 points of 2.3 % on new healthy units of the scored fleet's
-    model (300 units x 2 flights; without the drift for robustness_drift, whose drifted healthy units are
-    meant to look abnormal), and the scored fleet's own rate is consistent with it: its 95 % unit-bootstrap
-    interval contains 2.3 %. The scored fleet's 30 units alone cannot pin the rate to 1.5 points (their
-    sampling spread is about 1.5 points for a perfect threshold): python -m fuelhm_bench.benchmark.false_alarms
-    prints both for every scenario.
+    model (POPULATION_UNITS = 1500 units x 2 flights; without the drift for robustness_drift, whose drifted
+    healthy units are meant to look abnormal), and the scored fleet's own rate is not inconsistent with that
+    band: its 95 % unit-bootstrap interval overlaps 2.3 +- 1.5 %. (The scored fleet's 19-160 healthy units
+    are a small sample: a 95 % interval per scenario misses a true value in about one scenario of three
+    out of eight even when all are right, so the realised rate is not asked to contain 2.3 % itself.)
+    python -m fuelhm_bench.benchmark.false_alarms prints both for every scenario.
 
     Before (v2 fleets, 20 units x 10 flights, a quarter calibrating): 7.66 % on paper_2012's scored fleet
-    (95 % interval 3.2-14.5 %) with 5 calibration units."""
+    (95 % interval 3.2-14.5 %) with 5 calibration units. With 300 population units the measurement itself
+    was too coarse (paper_2012 4.17 %, 2.50-6.00; on 1500 units 3.00 %, 2.37-3.67)."""
     from fuelhm_bench.benchmark.false_alarms import KNOWLEDGE_SIZE, healthy_false_alarm_rate
 
     rates = healthy_false_alarm_rate(name, a=2.0, knowledge_size=KNOWLEDGE_SIZE)
@@ -108,7 +110,7 @@ def test_healthy_false_alarm_rate_at_a2_is_gaussian(name):
     assert len(calibrated) == 1
     (r,) = calibrated
     assert abs(r.population_rate - GAUSSIAN_FAR_A2) <= FAR_TOLERANCE, r
-    assert r.ci_low <= GAUSSIAN_FAR_A2 <= r.ci_high, r
+    assert r.ci_low <= GAUSSIAN_FAR_A2 + FAR_TOLERANCE and r.ci_high >= GAUSSIAN_FAR_A2 - FAR_TOLERANCE, r
 
 
 def test_split_rates_measure_the_spread_over_training_fleets():
@@ -164,3 +166,31 @@ def test_ideal_calibration_rate_is_set_by_the_score_shape():
         ideal_calibration_rate(gauss, a=-1)
     with pytest.raises(DataFormatError, match="at least 2 finite scores"):
         ideal_calibration_rate([1.0, np.nan])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["paper_2012", "--splits", "3", "--design", "400"], "--design must be UNITSxFLIGHTS with 2 <= UNITS <= "),
+    (["paper_2012", "--splits", "3", "--design", "400x3"], "FLIGHTS 1 or 2 (e.g. 400x1). Got '400x3' instead."),
+    (["paper_2012", "--splits", "3", "--design", "1x1"], "Got '1x1' instead."),
+    (["paper_2012", "--design", "400x1"], "--design needs --splits N"),
+])
+def test_false_alarms_cli_rejects_a_bad_design(argv, message, capsys):
+    from fuelhm_bench.benchmark.false_alarms import main
+
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_split_rates_refuses_more_flights_per_unit_than_the_pool_holds():
+    import dataclasses
+
+    from fuelhm_bench.benchmark.false_alarms import split_rates
+    from fuelhm_bench.errors import ParameterError
+
+    sc = load_scenario("paper_2012")
+    sc = dataclasses.replace(sc, training=dataclasses.replace(sc.training, units=40, flights_per_unit=3))
+    with pytest.raises(ParameterError, match="has 3 flights per unit; the 'pool' parameter of split_rates holds "
+                                             "only 2 for some units"):
+        split_rates(sc, n_splits=1, pool=_unit_table(240, 2, np.random.default_rng(3)))
