@@ -98,3 +98,26 @@ def test_allocator_is_tuned_once_per_process():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     glibc = sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"
     assert out == (["True", "False"] if glibc else ["False", "False"])
+
+
+def _fails(message: str):
+    raise ValueError(message)
+
+
+def test_concurrent_builds_give_the_same_tables_in_call_order():
+    """Builds made at once on threads (their pieces sharing one pool) return what they return in series."""
+    import threading
+
+    from fuelhm_bench.datasets.parallel import run_concurrently
+
+    configs = [FleetConfig(n_units=2, n_flights=2, mission=MISSION, seed=s) for s in (3, 4)]
+    doe = DesignOfExperiments(n_units=1, intensities=(1.0,), modes=("internal_leakage",), mission=MISSION)
+    calls = [lambda c=c: fleet_indicators(c, batch_size=1, workers=2)[0] for c in configs]
+    calls.append(lambda: run_doe(doe, batch_size=1, workers=2))
+    together = run_concurrently(calls, workers=2)
+    alone = [fleet_indicators(c, workers=1)[0] for c in configs] + [run_doe(doe, workers=1)]
+    assert [_bytes(t) for t in together] == [_bytes(t) for t in alone]
+    threads = run_concurrently([threading.get_ident] * 2, workers=1)  # one worker: in this thread, in order
+    assert threads == [threading.get_ident()] * 2
+    with pytest.raises(ValueError, match="first"):  # the first failure in call order
+        run_concurrently([lambda: 1, lambda: _fails("first"), lambda: _fails("second")], workers=2)

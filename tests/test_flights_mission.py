@@ -100,3 +100,31 @@ def test_demand_from_n2_takes_scalars_and_arrays():
     assert MISSION.demand_from_n2(n2).tobytes() == expected.tobytes()
     assert MISSION.demand_from_n2(0.8) == expected[2] and np.ndim(MISSION.demand_from_n2(0.8)) == 0
     assert MISSION.demand_from_n2(n2) is not n2 and n2[0] == 0.3  # the input is not modified
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_flight_channels_are_the_filters_and_schedule_bit_for_bit(seed):
+    """The one compiled pass of MissionProfile.sample gives the bytes of its three steps done one after the other:
+    the Gauss-Markov fluctuation added to the speed demand, the spool lag (both lfilter), the clip and schedule."""
+    from scipy.signal import lfilter
+
+    from fuelhm_bench.flights.mission import _flight_channels
+
+    r = np.random.default_rng(seed)
+    n = int(r.integers(2, 4000))
+    n_start = int(r.integers(0, n)) if seed % 3 else 0
+    target = r.uniform(-0.1, 1.3, n)
+    drive = r.normal(0.0, 0.05, n - n_start) if seed % 4 else np.empty(0)
+    b, a = float(np.exp(-r.uniform(1e-3, 1.0))), float(np.exp(-r.uniform(1e-3, 1.0)))
+    start = float(r.normal())
+    sweep = r.uniform(0.0, 0.06, int(r.integers(0, n))) if seed % 2 else np.empty(0)
+    args = (1.15, 0.55, 0.45, 0.003, 0.054)
+    expected_target = target.copy()
+    if drive.size:
+        expected_target[n_start:] += lfilter([1.0], [1.0, -b], drive, zi=[start])[0]
+    n2 = np.clip(lfilter([1.0 - a], [1.0, -a], expected_target, zi=[a * expected_target[0]])[0], 0.0, 1.15)
+    demand = np.clip((n2 - 0.55) / 0.45, 0.0, 1.0) * 0.054 + 0.003
+    demand[:sweep.size] = sweep
+    got = _flight_channels(target, n_start, drive, b, start, a, *args, sweep)
+    for g, e in zip(got, (n2, demand, 100.0 * n2, 1e3 * demand)):
+        assert g.tobytes() == e.tobytes()

@@ -4,7 +4,9 @@ The task graph: one **data build** per (scenario, seed)
 (:func:`~fuelhm_bench.benchmark.leaderboard.build_data`, which fills the
 simulation cache), on which every **evaluation** of that (scenario, seed)
 depends (:func:`~fuelhm_bench.benchmark.leaderboard.evaluate_task`: it reads the
-built data from the cache and runs the method sealed on the worker). Results
+built data from the cache and runs the method sealed on the worker). A worker
+keeps the evaluation it prepared (its own build's, or the first one it loaded)
+for the next evaluations of that (scenario, seed) it runs. Results
 come back to the client, which alone writes the store as they complete, so an
 interrupted distributed run resumes like a local one.
 
@@ -18,9 +20,20 @@ shared file system), and pass ``--scheduler tcp://HOST:8786``.
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
+
 from fuelhm_bench.errors import FuelHMError, ParameterError
 
 __all__ = ["run_distributed"]
+
+#: Prepared evaluations kept by a worker process, keyed by (scenario, seed, fidelity, scale, cache dir,
+#: flight minutes): a data build leaves its evaluation there, and the evaluations that land on the same
+#: worker use it instead of loading the data again (each load costs CPU-seconds).
+_EVALUATIONS: OrderedDict = OrderedDict()
+_EVALUATIONS_SIZE = 2
+_EVALUATIONS_LOCK = threading.Lock()
+_KEY_LOCKS: dict = {}
 
 
 def _client(jobs: int, scheduler: str | None):
@@ -44,8 +57,6 @@ def run_distributed(todo, kwargs: dict, done, *, jobs: int = 2, scheduler: str |
     """Run ``todo`` tasks on Dask; ``done(record, tables)`` is called in this process as each one completes."""
     from dask.distributed import as_completed
 
-    from fuelhm_bench.benchmark.leaderboard import build_data
-
     client, cluster = _client(jobs, scheduler)
     try:
         builds = {}
@@ -54,7 +65,7 @@ def run_distributed(todo, kwargs: dict, done, *, jobs: int = 2, scheduler: str |
         for t in sorted(todo, key=lambda t: -cost[t.scenario]):  # longest builds first (Dask priority too)
             group = (t.scenario, t.seed, t.fidelity, t.scale)
             if group not in builds:
-                builds[group] = client.submit(build_data, t.scenario, t.seed, t.fidelity, t.scale,
+                builds[group] = client.submit(_build_data, t.scenario, t.seed, t.fidelity, t.scale,
                                               kwargs["cache_dir"], kwargs["flight_minutes"], pure=False,
                                               key=f"data-{t.scenario_id}-{t.seed}-{t.key[:8]}",
                                               priority=cost[t.scenario])
@@ -91,7 +102,49 @@ def _build_costs(todo) -> dict:
     return costs
 
 
+def _evaluation(scenario, seed, fidelity, scale, cache_dir, flight_minutes):
+    """This worker's prepared evaluation of (scenario, seed), loaded once (:data:`_EVALUATIONS`).
+
+    The worker holds it as it holds it during an evaluation anyway: the method runs in its own sealed
+    process (:mod:`fuelhm_bench.methods.sandbox`), which never shares this process's memory.
+    """
+    from fuelhm_bench.benchmark.harness import prepare_evaluation
+
+    key = (str(scenario), seed, fidelity, float(scale), None if cache_dir is None else str(cache_dir), flight_minutes)
+    with _EVALUATIONS_LOCK:
+        lock = _KEY_LOCKS.setdefault(key, threading.Lock())
+    with lock:  # a worker with several threads loads each key once
+        with _EVALUATIONS_LOCK:
+            evaluation = _EVALUATIONS.get(key)
+            if evaluation is not None:
+                _EVALUATIONS.move_to_end(key)
+                return evaluation
+        evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale, cache_dir=cache_dir,
+                                        flight_minutes=flight_minutes)
+        with _EVALUATIONS_LOCK:
+            _EVALUATIONS[key] = evaluation
+            while len(_EVALUATIONS) > _EVALUATIONS_SIZE:
+                _EVALUATIONS.popitem(last=False)
+    return evaluation
+
+
+def _build_data(scenario: str, seed: int, fidelity, scale: float, cache_dir=None, flight_minutes=None) -> dict:
+    """:func:`~fuelhm_bench.benchmark.leaderboard.build_data` on a worker, which keeps the evaluation it prepared.
+
+    The worker's zygote (the interpreter its sealed methods fork from) starts first and imports its
+    modules meanwhile.
+    """
+    from fuelhm_bench.methods.sandbox import prestart_zygote
+
+    prestart_zygote()
+    ev = _evaluation(scenario, seed, fidelity, scale, cache_dir, flight_minutes)
+    return {"test": ev.n_flights, "fit": len(ev.fit_indicators), "calibration": len(ev.calibration_indicators),
+            "fidelity": ev.fidelity}
+
+
 def _evaluate_after(_built: dict, task, kwargs: dict):
     from fuelhm_bench.benchmark.leaderboard import evaluate_task
 
-    return evaluate_task(task, **kwargs)
+    evaluation = _evaluation(task.scenario, task.seed, task.fidelity, task.scale, kwargs["cache_dir"],
+                             kwargs["flight_minutes"])
+    return evaluate_task(task, evaluation=evaluation, **kwargs)

@@ -277,10 +277,10 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
 
     workers = check_workers(workers, "prepare_evaluation")
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress, "workers": workers}
-    knowledge = published_knowledge(sc, size=size, **common)
-    fit_part, cal_part = split_training(training_indicators(sc, **common))
     from fuelhm_bench.flights.scale import scaled_unit_count  # every mode of the fleet stays represented
     n_units = scaled_unit_count(sc.test_fleet_config(), scale)
+    knowledge, training = _build_products(sc, fidelity, size, n_units, robustness and bool(sc.drift), common)
+    fit_part, cal_part = split_training(training)
     scored = sc if n_units == sc.fleet.units else dataclasses.replace(
         sc, fleet=dataclasses.replace(sc.fleet, units=n_units))  # products above are keyed on the unscaled one
 
@@ -298,6 +298,35 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
 
     nominal = make(False, None) if robustness and sc.drift else None
     return make(True, nominal)
+
+
+def _build_products(sc, fidelity, size, n_units: int, both: bool, common: dict):
+    """The scenario's published knowledge and training table; every product :func:`prepare_evaluation` needs is
+    built (or loaded) here, at once on ``common["workers"]`` processes
+    (:func:`~fuelhm_bench.datasets.parallel.run_concurrently`), so that its later asks are memory hits."""
+    import threading
+
+    from fuelhm_bench.datasets.cache import (published_knowledge, scored_indicators, surrogate_doe, surrogate_healthy,
+                                         training_indicators)
+    from fuelhm_bench.datasets.parallel import run_concurrently
+
+    progress = common["progress"]
+    if progress is not None:  # called from several threads
+        lock = threading.Lock()
+
+        def locked(n: int) -> None:
+            with lock:
+                progress(n)
+
+        common = {**common, "progress": locked}
+    calls = [lambda: published_knowledge(sc, size=size, **common), lambda: training_indicators(sc, **common)]
+    for drifted in ((True, False) if both else (True,)):
+        if fidelity == "physics":
+            calls.append(lambda d=drifted: scored_indicators(sc, units=n_units, drifted=d, **common))
+        elif fidelity == "surrogate":
+            calls.append(lambda d=drifted: surrogate_healthy(sc, size=size, drifted=d, **common))
+            calls.append(lambda d=drifted: surrogate_doe(sc, size=size, drifted=d, **common))
+    return tuple(run_concurrently(calls, workers=common["workers"])[:2])
 
 
 # --------------------------------------------------------------------------- outcome

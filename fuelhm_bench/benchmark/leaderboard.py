@@ -333,7 +333,17 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
             if scheduler is not None or jobs > 1:
                 from fuelhm_bench.benchmark.distributed import run_distributed
 
-                run_distributed(todo, kwargs, done, jobs=jobs, scheduler=scheduler)
+                from fuelhm_bench.benchmark.views import _method_report
+
+                by_key = {t.key: t for t in todo}
+
+                def done_and_report(record: dict, tables: dict) -> None:
+                    # this process waits for the workers: it writes each entry's report now, not all in series
+                    # at the end (write_views skips the reports that are up to date)
+                    done(record, tables)
+                    _method_report(store, out, by_key[record["key"]])
+
+                run_distributed(todo, kwargs, done_and_report, jobs=jobs, scheduler=scheduler)
             else:
                 from fuelhm_bench.methods.sandbox import prestart_zygote
 

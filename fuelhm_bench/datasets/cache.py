@@ -49,6 +49,7 @@ import math
 import os
 import shutil
 import tempfile
+import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -68,6 +69,9 @@ __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", 
 _FORMAT = 1
 _MEMORY: OrderedDict[str, object] = OrderedDict()
 _MEMORY_SIZE = 64
+_MEMORY_GUARD = threading.Lock()
+_KEY_LOCKS: dict[str, threading.Lock] = {}
+_KEY_LOCKS_GUARD = threading.Lock()
 #: Prefix of the unit-coordinate columns (``unit_z:<parameter path>``) of the surrogate's tables.
 COORDINATE_PREFIX = "unit_z:"
 
@@ -340,12 +344,25 @@ def _entry(cache_dir, kind: str, sc, key: str) -> Path | None:
     return directory / f"fuelhm-v{_FORMAT}" / (f"{kind}-{key[:16]}" if sc is None else f"{kind}-{sc.id}-{key[:16]}")
 
 
+def _key_lock(key: str) -> threading.Lock:
+    """The lock of one product in this process (threads building products at once,
+    :func:`fuelhm_bench.datasets.parallel.run_concurrently`: a second asker of a product waits for the first)."""
+    with _KEY_LOCKS_GUARD:
+        return _KEY_LOCKS.setdefault(key, threading.Lock())
+
+
 def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callable[[], dict[str, pd.DataFrame]],
             finish: Callable[[dict[str, pd.DataFrame]], object], meta: dict):
     """Memory, then disk, then ``build()``; ``finish`` turns the tables into the product."""
-    if key in _MEMORY:
-        _MEMORY.move_to_end(key)
-        return _MEMORY[key]
+    with _key_lock(key):
+        return _cached_locked(key, entry, names, build, finish, meta)
+
+
+def _cached_locked(key, entry, names, build, finish, meta):
+    with _MEMORY_GUARD:
+        if key in _MEMORY:
+            _MEMORY.move_to_end(key)
+            return _MEMORY[key]
     product = _load_product(entry, key, names, finish)
     if product is None:
         # One builder per product at a time: a process that finds another one building it (e.g. two
@@ -357,9 +374,10 @@ def _cached(key: str, entry: Path | None, names: tuple[str, ...], build: Callabl
                 product = finish(tables)
                 if entry is not None:
                     _store(entry, key, tables, meta)
-    _MEMORY[key] = product
-    if len(_MEMORY) > _MEMORY_SIZE:
-        _MEMORY.popitem(last=False)
+    with _MEMORY_GUARD:
+        _MEMORY[key] = product
+        if len(_MEMORY) > _MEMORY_SIZE:
+            _MEMORY.popitem(last=False)
     return product
 
 

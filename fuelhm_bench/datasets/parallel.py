@@ -32,7 +32,7 @@ from concurrent.futures.process import BrokenProcessPool
 
 from fuelhm_bench.errors import ParameterError
 
-__all__ = ["check_workers", "default_workers", "run_ordered", "submit", "tune_allocator", "warm_up"]
+__all__ = ["check_workers", "default_workers", "ensure_pool", "run_concurrently", "run_ordered", "submit", "tune_allocator", "warm_up"]
 
 _POOLS: dict[int, ProcessPoolExecutor] = {}
 _WARM = False
@@ -130,6 +130,21 @@ def _pool(workers: int) -> ProcessPoolExecutor:
     return pool
 
 
+def ensure_pool(workers: int) -> bool:
+    """Start the pool of ``workers`` processes now, if :func:`run_ordered` would use one; returns whether it did.
+
+    A caller that is about to start threads calls it first: the workers are then
+    forked before those threads exist (a fork while another thread holds a lock,
+    e.g. an import lock, can leave the worker waiting on it for ever).
+    """
+    if workers <= 1 or not _can_have_children():
+        return False
+    pool = _pool(workers)
+    if getattr(pool, "_executor_manager_thread", True) is None:  # not started: a forking pool forks at its first task
+        pool.submit(int)
+    return True
+
+
 def _worker_init() -> None:
     """Workers ignore Ctrl-C: the parent handles it (one message, no partial output) and ends them."""
     import signal
@@ -206,6 +221,62 @@ def run_ordered(fn: Callable, tasks: Sequence[tuple], *, workers: int = 1, sizes
         if isinstance(exc, BrokenProcessPool) or not isinstance(exc, Exception):
             _terminate(workers)  # a worker died, or Ctrl-C: stop now; the next call starts a new pool
         raise
+    return results
+
+
+def run_concurrently(calls: Sequence[Callable[[], object]], *, workers: int = 1) -> list:
+    """``[call() for call in calls]``, the calls made at once on threads of this process when ``workers`` > 1.
+
+    Meant for builds of independent products whose pieces go to the same pool of
+    ``workers`` processes (:func:`run_ordered`): made one after the other, each
+    build ends with a tail where one worker waits for the other's last piece, and
+    its serial part in this process (joining, fitting, storing) leaves both workers
+    idle; made at once, their pieces share one queue and that part overlaps the
+    next build's simulation. Each result is the same object as in series (every
+    piece is deterministic and :func:`run_ordered` keeps submission order); the
+    pool is started before the threads (:func:`ensure_pool`). With ``workers`` <= 1
+    (or a process that may not have children) the calls are made in this thread,
+    in order. A call's exception is raised here (the first in call order); Ctrl-C
+    ends the pool (the threads' pieces fail with it) and is raised here.
+
+    Parameters
+    ----------
+    calls : sequence of callable
+        Zero-argument callables, thread-safe with respect to each other.
+    workers : int, default=1
+        The pool size the calls use.
+
+    Returns
+    -------
+    list
+        Their results, in the order of ``calls``.
+    """
+    if len(calls) <= 1 or not ensure_pool(workers):
+        return [call() for call in calls]
+    import threading
+
+    results: list = [None] * len(calls)
+    errors: list = [None] * len(calls)
+
+    def run(i: int) -> None:
+        try:
+            results[i] = calls[i]()
+        except BaseException as exc:  # noqa: BLE001 - handed to the calling thread
+            errors[i] = exc
+
+    threads = [threading.Thread(target=run, args=(i,), name=f"fuelhm-build-{i}", daemon=True)
+               for i in range(len(calls))]
+    for t in threads:
+        t.start()
+    try:
+        for t in threads:
+            t.join()
+    except BaseException:  # Ctrl-C while waiting: stop the pool's work now; the threads end with it
+        _terminate(workers)
+        raise
+    for exc in errors:
+        if exc is not None:
+            raise exc
     return results
 
 

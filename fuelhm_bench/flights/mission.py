@@ -76,18 +76,43 @@ def _first_order_filter_into(x: np.ndarray, gain: float, pole: float, z0: float,
 
 
 @njit(cache=True, nogil=True)
-def _engine_schedule(n2, n2_max, n2_low, n2_span, low_m, span_m, sweep):
-    """One pass over a flight's N2 [-], bit for bit the NumPy steps of :meth:`MissionProfile.sample`:
-    ``n2`` clipped to [0, n2_max] in place; the demand [m] of :meth:`MissionProfile.demand_from_n2`
-    (``low + clip((n2 - a) / (b - a), 0, 1) * (high - low)``), its first ``len(sweep)`` samples
-    replaced by the test sweep; and the recorded ``100 n2`` [%] and ``1e3 demand`` [mm]."""
-    n = n2.shape[0]
+def _flight_channels(target, n_start, drive, b, start, a, n2_max, n2_low, n2_span, low_m, span_m, sweep):
+    """N2 [-], demand [m], ``100 n2`` [%] and ``1e3 demand`` [mm] of a flight, in one compiled pass.
+
+    Bit for bit the three steps of :meth:`MissionProfile.sample` it replaces, each with the same
+    operations in the same order (compiled without fast-math):
+    ``_first_order_filter_into(drive, 1.0, b, start, target[n_start:], True)`` (the speed demand's
+    Gauss-Markov fluctuation; skipped when ``drive`` is empty), then
+    ``first_order_filter(target, 1 - a, a, a * target[0])`` (the HP spool's lag; its recursion runs
+    on the unclipped output), then the clip of N2 to [0, ``n2_max``], the demand of
+    :meth:`MissionProfile.demand_from_n2` (``low + clip((n2 - a) / (b - a), 0, 1) * (high - low)``)
+    with its first ``len(sweep)`` samples replaced by the test sweep, and the recorded channels. One
+    pass instead of three: the two recursions interleave, and the arrays are read and written once.
+    """
+    n = target.shape[0]
     m = sweep.shape[0]
+    n2 = np.empty(n)
     demand = np.empty(n)
     n2_pct = np.empty(n)
     demand_mm = np.empty(n)
+    noisy = drive.shape[0] > 0
+    a1_noise = -b
+    z_noise = start
+    gain = 1.0 - a
+    a1 = -a
+    z = 0.0
     for k in range(n):
-        v = n2[k]
+        tk = target[k]
+        if noisy and k >= n_start:
+            xk = drive[k - n_start]
+            yk = z_noise + 1.0 * xk
+            z_noise = 0.0 * xk - a1_noise * yk
+            tk = tk + yk
+        if k == 0:
+            z = a * tk
+        y = z + gain * tk
+        z = 0.0 * tk - a1 * y
+        v = y
         if v < 0.0:
             v = 0.0
         elif v > n2_max:
@@ -105,7 +130,7 @@ def _engine_schedule(n2, n2_max, n2_low, n2_span, low_m, span_m, sweep):
         demand[k] = d
         n2_pct[k] = 100.0 * v
         demand_mm[k] = 1e3 * d
-    return demand, n2_pct, demand_mm
+    return n2, demand, n2_pct, demand_mm
 
 
 @dataclass(frozen=True)
@@ -263,19 +288,20 @@ class MissionProfile:
         target[land + int(3 / T): land + int(15 / T)] = 0.85
         # Slow band-limited fluctuation of the speed demand after the start: first-order
         # Gauss-Markov process (exact discrete update, stationary std n2_noise_std).
+        b, start, drive = 0.0, 0.0, np.empty(0)
         if self.n2_noise_std > 0.0 and n > n_start:
             b = np.exp(-T / self.n2_noise_time_constant_s)
             drive = rng.normal(0.0, self.n2_noise_std * np.sqrt(1.0 - b * b), n - n_start)
             start = b * rng.normal(0.0, self.n2_noise_std)  # stationary initial state
-            _first_order_filter_into(drive, 1.0, float(b), float(start), target[n_start:], True)
-        # HP spool: first-order lag behind the speed demand (exact discrete update).
+        # HP spool: first-order lag behind the speed demand (exact discrete update); N2 clipped to
+        # [0, 1.15], the scheduled demand (test sweep first) and the recorded channels: one compiled pass
+        # (_flight_channels: the fluctuation added to the demand, then the lag, then the schedule).
         a = np.exp(-T / self.engine_time_constant_s)
-        n2 = first_order_filter(target, float(1 - a), float(a), float(a * target[0]))
-        # N2 clipped to [0, 1.15], the scheduled demand (test sweep first) and the recorded channels, in one pass.
         sweep = self._test_sweep(n_start) if self.test_sweep and n_start > 0 else np.empty(0)
-        demand, n2_pct, demand_mm = _engine_schedule(
-            n2, 1.15, float(self.schedule_n2_low), float(self.schedule_n2_high - self.schedule_n2_low),
-            float(self.sweep_low_m), float(self.sweep_high_m - self.sweep_low_m), sweep)
+        n2, demand, n2_pct, demand_mm = _flight_channels(
+            target, n_start, drive, float(b), float(start), float(a), 1.15, float(self.schedule_n2_low),
+            float(self.schedule_n2_high - self.schedule_n2_low), float(self.sweep_low_m),
+            float(self.sweep_high_m - self.sweep_low_m), sweep)
         temp0 = self.fuel_temp_start_degc + rng.normal(0.0, 8.0)
         temp1 = self.fuel_temp_end_degc + rng.normal(0.0, 8.0)
         tau = 0.3 * self.duration_s

@@ -1,0 +1,66 @@
+"""Run a command and log, every 0.5 s, the wall time and the CPU time (user + sys) of its whole process tree.
+
+A developer's tool for issue 10 (where a command's wall time goes: idle cores, serial phases)::
+
+    python tests/timeline.py fuelhm-bench paper --out /tmp/p --cache-dir "$(mktemp -d)" > timeline.log
+
+Each line: ``<wall s> cpu <tree CPU s> cores <CPU used per wall second since the last line>``; the
+command's stderr lines come time-stamped (``<wall s> ERR ...``; ``paper`` prints its stages there
+when stderr is not a terminal); the last line gives the wall time and the CPU of the finished tree.
+Linux only (reads ``/proc``).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+
+
+def tree_cpu(root: int) -> float:
+    """CPU seconds (user + sys, and those of reaped children) of ``root``'s descendants alive now."""
+    children: dict[int, list[tuple[int, list[str]]]] = {}
+    for p in os.listdir("/proc"):
+        if not p.isdigit():
+            continue
+        try:
+            with open(f"/proc/{p}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(fields[1]), []).append((int(p), fields))
+    tick = os.sysconf("SC_CLK_TCK")
+    total, stack, seen = 0.0, [root], set()
+    while stack:
+        for pid, fields in children.get(stack.pop(), []):
+            if pid not in seen:
+                seen.add(pid)
+                stack.append(pid)
+                total += sum(int(fields[i]) for i in (11, 12, 13, 14)) / tick
+    return total
+
+
+def main(argv: list[str]) -> int:
+    t0 = time.time()
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True)
+
+    def echo() -> None:
+        for line in proc.stderr:
+            print(f"{time.time() - t0:7.2f} ERR {line.rstrip()[:150]}", flush=True)
+
+    threading.Thread(target=echo, daemon=True).start()
+    last_cpu = last_t = 0.0
+    while proc.poll() is None:
+        time.sleep(0.5)
+        cpu, now = tree_cpu(os.getpid()), time.time() - t0
+        print(f"{now:7.2f} cpu {cpu:7.2f} cores {(cpu - last_cpu) / (now - last_t):4.2f}", flush=True)
+        last_cpu, last_t = cpu, now
+    r = os.times()
+    print(f"wall {time.time() - t0:.2f} children user {r.children_user:.2f} sys {r.children_system:.2f}")
+    return proc.returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
