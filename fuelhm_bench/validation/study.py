@@ -161,8 +161,9 @@ def why_table(dumps) -> str:
     Columns: recalibrated held-out gap and its noise floor, the structural level left by healthy
     altsim data of the same size (the mean recalibrated gap of the ``healthy`` dumps), the
     plausible (within-dispersion) recalibration's gap, the truth's candidate (free / plausible): its
-    BIC gain, held-out reduction against the rule's 50 % and fitted main parameter, and the best
-    reduction of a wrong candidate.
+    BIC gain, held-out reduction (of the whole gap, and in brackets of the part above the noise
+    floor, which the rule's 50 % applies to when ``reduction_above_floor``) and fitted main parameter,
+    and the best reduction of a wrong candidate (the same two).
     """
     healthy = [d["gap_recalibrated"] for d in dumps if d["truth"] == "none"]
     level = sum(healthy) / len(healthy) if healthy else float("nan")
@@ -179,14 +180,20 @@ def why_table(dumps) -> str:
             if c["effect"] in truths:
                 p = c["parameters"].get(main[0], {}).get("value") if main else None
                 cells.append(f"{'plausible' if c.get('within_dispersion') else 'free'} {c['delta_bic']:+.0f}, "
-                             f"{100 * c['gap_reduction']:+.0f} %" + (f", {p:.3g}" if p is not None else ""))
+                             f"{100 * c['gap_reduction']:+.0f} %{_above(c)}" + (f", {p:.3g}" if p is not None else ""))
         wrong = [c for c in rk if c["effect"] not in truths + ["none"]]
         bw = max(wrong, key=lambda c: c["gap_reduction"]) if wrong else None
         lines.append(f"| {d['case']} | `{d['verdict']}` | {d['gap_recalibrated']:.3f} "
                      f"({d['gap_floor_recalibrated']:.3f}) | "
                      + (f"{bn[0]['gap_after']:.3f}" if bn else "-") + " | " + ("; ".join(cells) or "-") + " | "
-                     + (f"{bw['effect']} {100 * bw['gap_reduction']:+.0f} %" if bw else "-") + " |")
+                     + (f"{bw['effect']} {100 * bw['gap_reduction']:+.0f} %{_above(bw)}" if bw else "-") + " |")
     return "\n".join(lines)
+
+
+def _above(c: dict) -> str:
+    """`` (above floor +x %)`` from a ranking entry, empty for dumps made before that column existed."""
+    v = c.get("gap_reduction_above_floor")
+    return "" if v is None else f" ({100 * v:+.0f} % above floor)"
 
 
 #: Reference laws compared by :func:`law_check`: library effect and parameters at the reference magnitude.
