@@ -71,3 +71,20 @@ def test_library_law_reproduces_the_altsim_lookalike(effect):
     assert abs(rows[("healthy", "all")]["slope"]) < 0.05
     assert 0.8 < rows[("effect", "all")]["slope"] < 1.2
     assert 0.8 < rows[("effect", "10-40")]["slope"] < 1.2 and rows[("effect", "10-40")]["correlation"] > 0.9
+
+
+@pytest.mark.slow
+def test_flow_force_fast_path_agrees_with_reference():
+    """The edge-drop flow force in the fast path and in the reference integrator (same frame-start pressures)."""
+    from fuelhm_bench.physics.reference import simulate_reference
+    from fuelhm_bench.physics.simulate import FlightInputs, simulate
+
+    model = LoopModel().with_parameters({"lvdt.noise_std_m": 0.0, "lvdt.adc_bits": 0}).with_effect(
+        "spool_flow_force", stiffness_ratio=0.5)
+    d = np.concatenate([np.full(50, 0.030), np.full(150, 0.045), np.linspace(0.045, 0.020, 100),
+                        np.full(60, 0.020), np.full(40, 0.0205), np.full(40, 0.0195)])
+    inp = FlightInputs(d, np.full(d.size, 0.82), 0.01)
+    fast = simulate([model], [inp], [np.random.default_rng(0)])[0]
+    ref = simulate_reference(model, inp, np.random.default_rng(0))
+    assert np.max(np.abs(fast.true_position_m - ref.true_position_m)) <= 10e-6
+    assert np.max(np.abs(fast.current_a - ref.current_a)) <= 0.03e-3
