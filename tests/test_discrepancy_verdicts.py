@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
 
-from fuelhm_bench.calibration.discrepancy import DiscrepancyConfig, find_discrepancy, separating_test
+from fuelhm_bench.calibration.discrepancy import (CandidateOutcome, DiscrepancyConfig, excess_reduction, find_discrepancy,
+                                                is_eligible, separating_test)
 from fuelhm_bench.calibration.flags import absorbing_parameters, dispersion_sigma
 from fuelhm_bench.calibration.probe import sparse_probe
 from fuelhm_bench.calibration.recalibrate import CalibrationConfig, prepare_units
@@ -155,6 +157,27 @@ def test_equivalent_lags_are_reported_with_the_test_that_separates_them():
     assert out["equivalents"][0]["alternative"] == "lvdt_lag" and "coil current" in out["equivalents"][0]["test"]
     # The same candidate fits under the default margin: the driver lag explains clearly more.
     assert e.reduction_selected - e.reduction_alternative > SMALL.equivalence_margin
+    # The reduction is judged above the noise floor: here the recalibration's own floor estimate
+    # exceeds its gap (the missed lag scatters the residuals of every transient), the lag's does not.
+    best = next(c for c in r.ranking if c.effect == "current_driver_lag")
+    assert best.excess_reduction >= 0.5 and best.eligible
+    assert next(c for c in out["ranking"] if c["effect"] == "current_driver_lag")["gap_reduction_above_floor"] >= 0.5
+
+
+def test_reduction_above_the_noise_floor():
+    # whole gap 0.6 -> 0.5 with floor 0.45: 17 % of the gap, 1 - sqrt(0.25 - 0.2025) / sqrt(0.36 - 0.2025)
+    assert excess_reduction(0.5, 0.45, 0.6, 0.45) == pytest.approx(1 - math.sqrt(0.0475 / 0.1575))
+    # one floor, the smaller estimate; a gap at or below it has nothing left
+    assert excess_reduction(0.2, 0.25, 1.2, 1.5) == 1.0
+    assert excess_reduction(0.5, 0.3, 1.2, 1.5) == pytest.approx(1 - math.sqrt(0.16) / math.sqrt(1.35))
+    assert excess_reduction(0.4, 0.5, 0.45, 0.5) == 0.0  # the reference has no excess: nothing to explain
+    assert math.isnan(excess_reduction(0.4, float("nan"), 0.6, 0.2))
+    oc = CandidateOutcome("lvdt_lag", {}, 0.0, 50.0, 1.0, 0.5, 0.17, False, 1, 0.0, {}, excess_reduction=0.55)
+    assert is_eligible(oc, bic_threshold=10.0, min_gap_reduction=0.5, above_floor=True)
+    assert not is_eligible(oc, bic_threshold=10.0, min_gap_reduction=0.5)
+    assert DiscrepancyConfig().reduction_above_floor
+    with pytest.raises(ParameterError, match="reduction_above_floor"):
+        DiscrepancyConfig(reduction_above_floor=1)
 
 
 @pytest.mark.slow

@@ -124,6 +124,11 @@ class DiscrepancyConfig:
         structural mismatch alone, and a second member is as much a claim as the first).
     continue_ratio : float, default=1.5
         The forward selection stops when the held-out gap is below this multiple of its noise floor.
+    reduction_above_floor : bool, default=True
+        Measure the held-out reductions of ``min_gap_reduction`` and ``min_step_reduction`` on the part
+        of the gap above its noise floor, ``sqrt(g^2 - f^2)`` (:func:`excess_reduction`), instead
+        of on the whole gap: no model can remove the noise part, so on the whole gap the 50 % was
+        unattainable once the gap was within 2x its floor (docs/discrepancy.md section 9, fifth round).
     equivalence_margin : float, default=0.1
         An eligible candidate whose held-out gap reduction is within this of the selected one's
         is reported as an equivalent explanation.
@@ -168,6 +173,7 @@ class DiscrepancyConfig:
     absorbed_z: float = 5.0
     tradeoff_tolerance: float = 0.1
     early_stop: bool = True
+    reduction_above_floor: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_effects, int) or isinstance(self.max_effects, bool) or self.max_effects < 1:
@@ -198,6 +204,8 @@ class DiscrepancyConfig:
                               self.heldout_max_frames)
         if not isinstance(self.early_stop, bool):
             raise range_error("DiscrepancyConfig.early_stop", "True or False", self.early_stop)
+        if not isinstance(self.reduction_above_floor, bool):
+            raise range_error("DiscrepancyConfig.reduction_above_floor", "True or False", self.reduction_above_floor)
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             raise range_error("DiscrepancyConfig.seed", "an integer >= 0", self.seed)
 
@@ -206,7 +214,9 @@ class DiscrepancyConfig:
         """The decision rule in words."""
         return (f"accept the candidate with the lowest BIC on the fit flights if its BIC is lower than the "
                 f"recalibrated model's by more than {self.bic_threshold:g} AND it reduces the held-out gap by at "
-                f"least {100 * self.min_gap_reduction:g} % relative to recalibration alone (fitted the same way: "
+                f"least {100 * self.min_gap_reduction:g} % "
+                + ("(of the part above its noise floor) " if self.reduction_above_floor else "")
+                + f"relative to recalibration alone (fitted the same way: "
                 f"free, or -- when the free recalibration absorbs -- within {self.absorbed_z:g} dispersion sigmas, "
                 f"and then also beats the free recalibration's held-out gap); add further effects "
                 f"(forward selection, up to {self.max_effects}) while the BIC improves by more than "
@@ -380,6 +390,10 @@ class CandidateOutcome:
         recalibration (which may absorb the effect into implausible values) [-].
     stopped_early : bool
         The fit was ended early by :class:`EarlyStop` (it could not earn its parameters).
+    excess_reduction : float
+        Reduction of the held-out gap *above its noise floor* relative to the same reference,
+        ``1 - sqrt(g^2 - f^2) / sqrt(g_ref^2 - f^2)``, ``f`` the smaller of the two models' floors
+        (0 when the reference has no excess; :func:`excess_reduction`) [-].
     """
 
     effect: str
@@ -399,6 +413,7 @@ class CandidateOutcome:
     delta_bic_free: float = float("nan")
     gap_reduction_free: float = float("nan")
     stopped_early: bool = False
+    excess_reduction: float = float("nan")
 
     @property
     def label(self) -> str:
@@ -418,6 +433,7 @@ class CandidateOutcome:
             "gap_reduction_vs_free_recalibration": (None if math.isnan(self.gap_reduction_free)
                                                    else self.gap_reduction_free),
             "stopped_early": self.stopped_early,
+            "gap_reduction_above_floor": None if math.isnan(self.excess_reduction) else self.excess_reduction,
         }
 
 
@@ -785,8 +801,8 @@ def heldout_models(unit_models: dict, fleet, held_sets: dict) -> dict:
 def _fit_candidate(cand: EffectCandidate, base_values: dict, fit_sets: dict, held_sets: dict, start_model,
                    parameters: tuple, iterations: int, curve: CurveConfig,
                    extra_start: tuple | None = None,
-                   stop: EarlyStop | None = None) -> tuple[JointFit, float, float]:
-    """Multi-start grid, joint fit, held-out gap. Returns (fit, held-out gap, seconds).
+                   stop: EarlyStop | None = None) -> tuple[JointFit, float, float, float]:
+    """Multi-start grid, joint fit, held-out gap. Returns (fit, held-out gap, seconds, the gap's noise floor).
 
     Start points: every grid point of the effect, combined with two sets of unit values --
     the recalibrated ones (which may have drifted to mimic the missing effect) and the input
@@ -819,9 +835,11 @@ def _fit_candidate(cand: EffectCandidate, base_values: dict, fit_sets: dict, hel
     fleet = apply_values(_with_effect(start_model, cand, cand.start_values({})),
                          {**fleet_values(res.unit_values, parameters), **res.shared_values})
     hm = heldout_models(res.unit_models, fleet, held_sets)
-    g = gap(merge_sets(list(held_sets.values())),
-            np.concatenate(rp.replay_batch([hm[k] for k in held_sets], list(held_sets.values()))), curve)
-    return res, g, time.perf_counter() - t0
+    merged = merge_sets(list(held_sets.values()))
+    v = np.concatenate(rp.replay_batch([hm[k] for k in held_sets], list(held_sets.values())))
+    g = gap(merged, v, curve)
+    floor = gap_noise_floor(merged, v, curve, correlation_time([merged], [v]))
+    return res, g, time.perf_counter() - t0, floor
 
 
 _WORKER: dict = {}
@@ -840,9 +858,8 @@ def _task_candidate(effect: str, overrides: dict):
     per-task ``overrides`` (unit start values, parameters, start model, extra start, stop rule)."""
     w = {**_WORKER, **overrides}
     cand = next(c for c in w["candidates"] if c.effect == effect)
-    res, g, sec = _fit_candidate(cand, w["unit_values"], w["fit_sets"], w["held_sets"], w["start_model"],
-                                 w["parameters"], w["iterations"], w["curve"], w.get("extra_start"), w.get("stop"))
-    return res, g, sec
+    return _fit_candidate(cand, w["unit_values"], w["fit_sets"], w["held_sets"], w["start_model"],
+                          w["parameters"], w["iterations"], w["curve"], w.get("extra_start"), w.get("stop"))
 
 
 def _task_recalibration(overrides: dict):
@@ -911,14 +928,38 @@ def _candidate_tasks(cands: list, overrides, deps=lambda effect: (), prefix: str
 
 
 # --------------------------------------------------------------------------- decision
-def is_eligible(outcome: CandidateOutcome, *, bic_threshold: float, min_gap_reduction: float) -> bool:
+def excess_reduction(g: float, floor: float, g_ref: float, floor_ref: float) -> float:
+    """Reduction of the held-out gap above its noise floor: ``1 - e / e_ref`` with ``e = sqrt(max(g^2 - f^2, 0))``.
+
+    The noise part of a gap (the standard error of its cell means) cannot be removed by any model, so a
+    reduction of the whole gap is capped at ``1 - f / g``; this one is not. One floor serves both gaps,
+    the smaller of the two models' estimates: the floor is estimated from the scatter of the residuals
+    within the cells, and a model that misses an effect leaves its signature there too (a missed lag
+    scatters the residuals of every transient), so its floor overstates the data's noise. 0 when the
+    reference has no excess (nothing to explain); NaN when a floor is unknown.
+    """
+    if not (math.isfinite(floor) and math.isfinite(floor_ref)):
+        return float("nan")
+    f2 = min(floor, floor_ref) ** 2
+    e_ref = math.sqrt(max(g_ref * g_ref - f2, 0.0))
+    if e_ref <= 0.0:
+        return 0.0
+    return 1.0 - math.sqrt(max(g * g - f2, 0.0)) / e_ref
+
+
+def is_eligible(outcome: CandidateOutcome, *, bic_threshold: float, min_gap_reduction: float,
+                above_floor: bool = False) -> bool:
     """Whether a candidate earns its parameters: BIC gain > ``bic_threshold`` and held-out gap reduction
     >= ``min_gap_reduction`` (both relative to recalibration alone, fitted the same way: free, or within
-    the dispersion). A fit within the dispersion must in addition do better on the held-out flights than
-    the free recalibration, which may bend its values to mimic the effect: an explanation with plausible
-    values has to beat the absorption, not only the plausible recalibration."""
+    the dispersion; with ``above_floor``, the reduction of the gap above its noise floor,
+    :func:`excess_reduction`). A fit within the dispersion must in addition do better on the held-out
+    flights than the free recalibration, which may bend its values to mimic the effect: an explanation
+    with plausible values has to beat the absorption, not only the plausible recalibration."""
+    red = outcome.gap_reduction
+    if above_floor and not math.isnan(outcome.excess_reduction):
+        red = outcome.excess_reduction
     ok = (outcome.effect != "none" and outcome.delta_bic > bic_threshold
-          and outcome.gap_reduction >= min_gap_reduction)
+          and red >= min_gap_reduction)
     if ok and outcome.bounded and not math.isnan(outcome.gap_reduction_free):
         ok = outcome.gap_reduction_free > 0.0
     return ok
@@ -1099,7 +1140,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     finished = {eff: r for eff, r in results.items() if r[0].message != "stopped early"}
     if finished:
         scored = []
-        for eff, (res, _, _) in finished.items():
+        for eff, (res, *_) in finished.items():
             models = {k: apply_values(start, res.unit_values[k]) for k in fit_sets}
             scored.append((_rss(models, fit_sets), eff))
         rss_best, eff_best = min(scored)
@@ -1122,12 +1163,12 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     cur_bounded = [False]  # whether the fits being collected are kept within the dispersion
 
     def collect(round_results: dict, held_paths: tuple, fit_params: tuple, ref_bic: float, ref_gap: float,
-                tag: str, bounded: bool = False, free: tuple | None = None) -> list:
+                ref_floor: float, tag: str, bounded: bool = False, free: tuple | None = None) -> list:
         out = []
         for cand in cands:
             if cand.effect not in round_results:
                 continue
-            res, g, sec = round_results[cand.effect]
+            res, g, sec, fl = round_results[cand.effect]
             bic = noise.bic(res.rss, res.n_parameters)
             eff_model = res.unit_models[next(iter(res.unit_models))].effect(cand.effect)
             red = 1.0 - g / ref_gap if ref_gap > 0 else 0.0
@@ -1138,7 +1179,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             oc = CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, ref_bic - bic, res.rss,
                                   g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag,
                                   bounded=bounded or cur_bounded[0], stopped_early=res.message == "stopped early",
-                                  **extra)
+                                  excess_reduction=excess_reduction(g, fl, ref_gap, ref_floor), **extra)
             label = oc.label
             fits[(tag, label)] = (res, g, cand, held_paths, fit_params)
             out.append(oc)
@@ -1147,7 +1188,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                                                           if oc.stopped_early else ""))
         return out
 
-    outcomes += collect(results, (), params, bic0, g_recal, "1")
+    floor_recal = gap_noise_floor(held, v_recal, cal.curve, correlation_time([held], [v_recal]))
+    outcomes += collect(results, (), params, bic0, g_recal, floor_recal, "1")
 
     # Recalibrated values outside the manufacturing dispersion likely absorb a missing effect: flag
     # them (3 sigma). When some lie beyond absorbed_z sigmas, fit the recalibration and every candidate
@@ -1167,7 +1209,9 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         b_base = done["recalibration:bounded"]
         b_params = b_base.unit_parameters
         b_fleet = apply_values(start, fleet_values(b_base.unit_values, b_params))
-        g_b = gap(held, held_velocity(heldout_models(b_base.unit_models, b_fleet, held_sets)), cal.curve)
+        v_b = held_velocity(heldout_models(b_base.unit_models, b_fleet, held_sets))
+        g_b = gap(held, v_b, cal.curve)
+        floor_b = gap_noise_floor(held, v_b, cal.curve, correlation_time([held], [v_b]))
         bic_b = noise.bic(b_base.rss, b_base.n_parameters)
         say(f"recalibration within {config.absorbed_z:g} dispersion sigmas: held-out gap {g_b:.3f} mm/s, "
             f"dBIC {bic0 - bic_b:.1f} vs the free recalibration")
@@ -1176,10 +1220,11 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                                          b_base.unit_values, bounded=True))
         results_b = {c.effect: done["bounded:" + c.effect] for c in cands}
         cur_bounded[0] = True
-        outcomes += collect(results_b, (), b_params, bic_b, g_b, "1", bounded=True, free=(bic0, g_recal))
+        outcomes += collect(results_b, (), b_params, bic_b, g_b, floor_b, "1", bounded=True, free=(bic0, g_recal))
         cur_bounded[0] = False
 
-    rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_gap_reduction}
+    rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_gap_reduction,
+            "above_floor": config.reduction_above_floor}
     outcomes = [dataclasses.replace(c, eligible=is_eligible(c, **rule)) for c in outcomes]
     ranking = tuple(sorted(outcomes, key=lambda c: c.bic))
 
@@ -1223,8 +1268,10 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                   "stop": stop_rule(best.bic)}
         results_k = _run_tasks(_candidate_tasks(remaining, lambda e, done, o=over_k: o), payload, config.n_jobs)
         tag = str(round_no + 1)
-        round_outcomes = collect({k: v for k, v in results_k.items()}, held_paths, fit_params, best.bic, g_new, tag)
-        round_rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_step_reduction}
+        round_outcomes = collect({k: v for k, v in results_k.items()}, held_paths, fit_params, best.bic, g_new,
+                                 floor_cur, tag)
+        round_rule = {"bic_threshold": config.bic_threshold, "min_gap_reduction": config.min_step_reduction,
+                      "above_floor": config.reduction_above_floor}
 
     chosen = members[0].effect if members else "none"
     final_fit = cur["fit"]
@@ -1320,5 +1367,5 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "EarlyStop", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
-           "correlation_time", "effect_intervals", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
+           "correlation_time", "effect_intervals", "excess_reduction", "find_discrepancy", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
            "best_explanation"]

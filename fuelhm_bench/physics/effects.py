@@ -12,7 +12,9 @@ id                      equation
 ======================  =====================================================
 ``spool_overlap``       openings ``o = +/-x_s - u``, ``u = overlap_m > 0``
 ``spool_flow_force``    steady flow force acts as a centring spring on the spool:
-                        ``x_c <- x_c / (1 + k_r * dp_s/70 bar * w(|x_c|)/w_null)``
+                        ``x_c <- x_c / (1 + k_r * dp_e/70 bar * w(|x_c|)/w_null)``,
+                        ``dp_e = dp_s - sgn(x_c) (p1 - p2)`` the summed drops of
+                        the two open metering edges (frame-start pressures)
 ``rod_friction``        ``F = [F_c + (F_s - F_c) exp(-(v/v_s)^2)] sgn v + b v`` on the rod,
                         with stiction (the rod stays still while the available
                         force is within +/-F_s)
@@ -65,10 +67,15 @@ class SpoolOverlap:
 class SpoolFlowForce:
     """Steady (Bernoulli) flow force on the spool, a pressure-dependent centring spring.
 
+    The force of each open metering edge is proportional to its opening and to its own
+    pressure drop (Merritt, *Hydraulic Control Systems*, chapter 5); the two open edges' drops sum
+    to ``dp_s - sgn(x_c) (p1 - p2)`` (docs/physics.md §7).
+
     Parameters
     ----------
     stiffness_ratio : float, default=0.25
-        Flow-force stiffness over feedback stiffness at 70 bar and null slot width [-], in (0, 3].
+        Flow-force stiffness over feedback stiffness at 70 bar of summed edge drop and null slot
+        width [-], in (0, 3].
     """
 
     id: ClassVar[str] = "spool_flow_force"

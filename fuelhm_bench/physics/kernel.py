@@ -141,7 +141,7 @@ def pack_model(model, fuel_temp_degc: float = 20.0) -> tuple[np.ndarray, np.ndar
     k[K_RMAX] = model.lvdt.range_max_m
     lag = model.effect("lvdt_lag")
     k[K_LAGSEL] = 1.0 if lag else 0.0
-    k[K_DIRECT] = 1.0 if (ls or rf) else 0.0
+    k[K_DIRECT] = 1.0 if (ls or rf or ff) else 0.0  # the flow force reads the chamber pressures
     k[K_ENDSTOPS] = 1.0
     dl = model.effect("current_driver_lag")
     k[K_DRVLAG] = dl.time_constant_s if dl else 0.0
@@ -152,15 +152,31 @@ def pack_model(model, fuel_temp_degc: float = 20.0) -> tuple[np.ndarray, np.ndar
 
 
 @numba.njit(cache=True)
-def spool_command(i_cmd: float, dps: float, k) -> float:
+def load_pressure(p1: float, f_load: float, c) -> float:
+    """Chamber pressure difference ``p1 - p2`` [Pa] for a head pressure and the rod load (0 when unknown)."""
+    if math.isnan(p1):
+        return 0.0
+    return p1 - (p1 * c[cyl.C_A1] - f_load) / c[cyl.C_A2]
+
+
+@numba.njit(cache=True)
+def spool_command(i_cmd: float, dps: float, k, dp12: float = 0.0) -> float:
     """Torque-motor spool command x_c [m] for a commanded current [A] (driver, null bias, flow force).
 
     Not clipped: the spool's stops limit the spool itself (:func:`~fuelhm_bench.physics.servovalve.spool_stop`),
     so friction and backlash do not reduce the full-stroke opening.
+
+    The flow force (Merritt's steady flow force, a centring force proportional to the opening and to
+    the pressure drop across each open metering edge) scales with the sum of the two open edges'
+    drops, ``(p_s - p_r) - sgn(x_c) (p1 - p2)``: ``dp12`` is the chamber pressure difference
+    ``p1 - p2`` [Pa] (the previous frame's, 0 when unknown).
     """
     i_coil = k[K_DGAIN] * i_cmd + k[K_DOFF]
     x_c = k[K_KSV] * (i_coil - k[K_INB])
     if k[K_FF] > 0.0:
+        drop = dps - dp12 if x_c >= 0.0 else dps + dp12
+        if drop < 0.0:
+            drop = 0.0
         ax = abs(x_c)
         if ax <= k[K_OA]:
             w = k[K_WNULL]
@@ -168,7 +184,7 @@ def spool_command(i_cmd: float, dps: float, k) -> float:
             w = k[K_WOUT]
         else:
             w = k[K_WNULL] + (k[K_WOUT] - k[K_WNULL]) * (ax - k[K_OA]) / (k[K_OB] - k[K_OA])
-        x_c = x_c / (1.0 + k[K_FF] * (dps / 7e6) * (w / k[K_WNULL]))
+        x_c = x_c / (1.0 + k[K_FF] * (drop / 7e6) * (w / k[K_WNULL]))
     return x_c
 
 
@@ -352,7 +368,10 @@ def simulate_one(c, k, lv, table, use_table, n2_lo, n2_step, n2_hi, demand, n2s,
             elif i_sv < i_play - k[K_HYST]:
                 i_play = i_sv + k[K_HYST]
             i_sv = i_play
-        x_c = spool_command(i_sv, dps, k)
+        dp12 = 0.0
+        if k[K_FF] > 0.0:
+            dp12 = load_pressure(p1, k[K_FAERO100] * n2 * n2 + k[K_KX] * (x - k[K_XREF]), c)
+        x_c = spool_command(i_sv, dps, k, dp12)
         dz = k[K_FRICNUM] / max(dps, 1e5)
         # 3. spool positions at the two Gauss-Legendre points of the frame and at its end
         xs0, xfb0 = x_s, x_fb

@@ -91,9 +91,12 @@ def simulate_reference(model, inputs: FlightInputs, rng: np.random.Generator, *,
             i = float(i_open)
         n2 = float(inputs.n2_frac[t])
         dps = k[kernel.K_DPS100] * n2 * n2
-        x_c = kernel.spool_command(i, dps, k)
-        dz = k[kernel.K_FRICNUM] / max(dps, 1e5)
         f_aero = k[kernel.K_FAERO100] * n2 * n2
+        dp12 = 0.0  # the flow force reads the chamber pressures of the frame start (as the fast path)
+        if k[kernel.K_FF] > 0.0:
+            dp12 = kernel.load_pressure(state["p1"], f_aero + k[kernel.K_KX] * (s[2] - k[kernel.K_XREF]), c)
+        x_c = kernel.spool_command(i, dps, k, dp12)
+        dz = k[kernel.K_FRICNUM] / max(dps, 1e5)
 
         # Spool mode over this frame (x_c held): stuck, free travel in the play, engaged, at its stop.
         e0 = x_c - s[1]

@@ -12,13 +12,16 @@ part                        project model                        altsim
 ==========================  ===================================  =====================================
 spool                       first order, play, friction dead     second order (``w_n``, ``zeta``), no
                             zone                                 play, no dead zone
-flow force (optional)       centring spring ~ supply pressure    Bernoulli force ~ edge pressure drops
+flow force (optional)       centring spring on the command ~     stiffness on the spool's position in
+                            open edges' drops (frame start)      its 2nd-order dynamics ~ edge drops
+                                                                 (command clipped at the stroke first)
 metering edges              softplus opening, piecewise-linear   sharp edges + *laminar* clearance leak
                             width transition                     per edge, logistic width transition
 cylinder                    quasi-static (no compressibility)    dynamic: chamber pressures with bulk
                                                                  modulus and dead volumes, rod mass,
                                                                  viscous damping
-rod friction (optional)     Coulomb + Stribeck with stiction     ``F_c tanh(v / v_t)`` (no stiction)
+rod friction (optional)     Coulomb + Stribeck with stiction     ``F_c tanh(v / v_t)`` (no stiction),
+                                                                 linearised-implicit in the sub-step
 LVDT                        3-state filter                       second-order low-pass (+ optional lag)
 ==========================  ===================================  =====================================
 
@@ -210,7 +213,7 @@ def _area(o, w0, w1, om, ow):
 
 
 @numba.njit(cache=True)
-def _run(q, demand, n2, temp, noise, frame, out_i, out_y):  # pragma: no cover - compiled
+def _run(q, demand, n2, temp, noise, frame, out_i, out_y, max_dt=2.5e-4):  # pragma: no cover - compiled
     (rho, pr, dps100, ksv, inb, smax, wn, zeta, w0, w1, om, ow, cd, cleak, a1, a2, stroke, v0, beta, mass, bvisc,
      acd, faero, kp, ki, zmax, db, isat, wl, zl, nstd, qz, rmin, rmax, lap, kff, fc, tlag, kx, xref, tdrv, hyst,
      kleak20, vslope, droop, drift) = (q[0], q[1], q[2], q[3], q[4], q[5], q[6], q[7], q[8], q[9], q[10], q[11],
@@ -219,7 +222,7 @@ def _run(q, demand, n2, temp, noise, frame, out_i, out_y):  # pragma: no cover -
                                        q[34], q[35], q[36], q[37], q[38], q[39], q[40], q[41], q[42], q[43], q[44],
                                        q[45])
     n = demand.shape[0]
-    nsub = max(int(math.ceil(frame / 2.5e-4)), 1)
+    nsub = max(int(math.ceil(frame / max_dt)), 1)
     dt = frame / nsub
     kq = cd * math.sqrt(2.0 / rho)
     kc = acd * math.sqrt(2.0 / rho)
@@ -304,8 +307,14 @@ def _run(q, demand, n2, temp, noise, frame, out_i, out_y):  # pragma: no cover -
             p2 = max(p2, 1e4)
             f = p1 * a1 - p2 * a2 - f_aero - kx * (x - xref) - bvisc * v
             if fc > 0.0:
-                f -= fc * math.tanh(v / 1e-3)
-            v += f / mass * dt
+                # friction linearised about v and taken implicitly (its slope fc / 1 mm/s makes the
+                # explicit update unstable below a few mm/s: the velocity chattered around zero there
+                # and the mean friction vanished)
+                th = math.tanh(v / 1e-3)
+                f -= fc * th
+                v += f / mass * dt / (1.0 + fc * (1.0 - th * th) / 1e-3 * dt / mass)
+            else:
+                v += f / mass * dt
             x += v * dt
             if x < 0.0:
                 x = 0.0
@@ -367,7 +376,7 @@ def mission(duration_s: float, frame_s: float, rng: np.random.Generator) -> tupl
 
 def simulate_flights(effects: AltEffects = AltEffects(), *, n_units: int = 2, n_flights: int = 2,
                      minutes: float = 4.0, frame_s: float = 0.01, noise_std_m: float = 3e-6,
-                     dispersion: float = 1.0, seed: int = 0) -> pd.DataFrame:
+                     dispersion: float = 1.0, seed: int = 0, substep_s: float = 2.5e-4) -> pd.DataFrame:
     """Simulate a fleet with the altsim, in the measured-data format.
 
     Parameters
@@ -386,6 +395,8 @@ def simulate_flights(effects: AltEffects = AltEffects(), *, n_units: int = 2, n_
         Scale of the manufacturing dispersion.
     seed : int
         Master seed.
+    substep_s : float, default=2.5e-4
+        Largest integration sub-step [s] (smaller: a convergence check).
 
     Returns
     -------
@@ -396,6 +407,8 @@ def simulate_flights(effects: AltEffects = AltEffects(), *, n_units: int = 2, n_
         raise range_error("minutes", ">= 2", minutes)
     if not (frame_s > 0 and frame_s <= 0.05):
         raise range_error("frame_s", "in (0, 0.05]", frame_s)
+    if not (substep_s > 0 and substep_s <= 2.5e-4):
+        raise range_error("substep_s", "in (0, 2.5e-4]", substep_s)
     nominal = AltParams(noise_std_m=noise_std_m, effects=effects)
     root = np.random.SeedSequence([int(seed), 4242])
     unit_seqs = root.spawn(n_units)
@@ -410,7 +423,7 @@ def simulate_flights(effects: AltEffects = AltEffects(), *, n_units: int = 2, n_
             noise = rng_u.standard_normal(demand.size)
             out_i = np.zeros(demand.size)
             out_y = np.zeros(demand.size)
-            status = _run(q, demand, n2, temp, noise, float(frame_s), out_i, out_y)
+            status = _run(q, demand, n2, temp, noise, float(frame_s), out_i, out_y, float(substep_s))
             if status != 0:
                 raise ParameterError(f"altsim: non-finite state in unit {u}, flight {fid}; check the effects {effects}.")
             parts.append(pd.DataFrame({
