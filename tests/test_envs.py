@@ -430,6 +430,30 @@ def test_scenarios_flying_the_same_fleet_share_one_build(tmp_path):
     assert content_key("fleet", config) == key
 
 
+def test_a_change_of_the_product_code_is_another_cache_entry(tmp_path, monkeypatch):
+    """Keys cover the source of the code that builds products: an edited law (same release, same scenario)
+    never reads the entry the old code wrote."""
+    from fuelhm_bench.datasets import cache
+    from fuelhm_bench.datasets.cache import cache_key, code_fingerprint, content_key, source_digest
+
+    (tmp_path / "physics").mkdir()
+    (tmp_path / "physics" / "law.py").write_text("K = 1.0\n")
+    (tmp_path / "taxonomy.py").write_text("IDS = ()\n")
+    digest = source_digest(tmp_path, ("physics", "taxonomy.py", "absent"))
+    assert digest == source_digest(tmp_path, ("taxonomy.py", "physics"))  # sorted by path, missing parts ignored
+    (tmp_path / "physics" / "law.py").write_text("K = 2.0\n")
+    assert source_digest(tmp_path, ("physics", "taxonomy.py")) != digest
+    (tmp_path / "physics" / "notes.txt").write_text("not code")
+    assert source_digest(tmp_path, ("physics", "taxonomy.py")) == source_digest(tmp_path, ("physics", "taxonomy.py"))
+    assert len(code_fingerprint()) == 64 and code_fingerprint() == code_fingerprint()
+
+    sc = small_scenario()
+    config = sc.training_fleet_config()
+    keys = (content_key("fleet", config), cache_key("training", sc))
+    monkeypatch.setattr(cache, "code_fingerprint", lambda: "0" * 64)
+    assert content_key("fleet", config) != keys[0] and cache_key("training", sc) != keys[1]
+
+
 def test_cache_location_from_environment_and_memory_only(tmp_path, monkeypatch):
     monkeypatch.setenv("FUELHM_BENCH_CACHE", str(tmp_path / "env-cache"))
     assert default_cache_dir() == tmp_path / "env-cache"

@@ -33,7 +33,10 @@ published knowledge. The other products' key (:func:`cache_key`) covers the kind
 :meth:`Scenario.to_dict <fuelhm_bench.scenarios.Scenario>` except
 ``description``), the effective flight duration, the build parameters, the
 package version, the cache format and the indicator names (a table without a new indicator is
-never served): a changed scenario, size or release never reads a stale entry. The cache directory is, in order: the ``cache_dir``
+never served): a changed scenario, size or release never reads a stale entry. Both keys also cover
+the source of the code that builds products (:func:`code_fingerprint`: the simulator, flights,
+indicators, published knowledge, surrogate and scenario loader), so a changed law, kernel or
+extractor never reads an entry built by other code, even within one release. The cache directory is, in order: the ``cache_dir``
 argument, the environment variable ``FUELHM_BENCH_CACHE``,
 ``$XDG_CACHE_HOME/fuelhm-bench``, ``~/.cache/fuelhm-bench``; ``cache_dir=False``
 keeps products in memory only.
@@ -43,6 +46,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -67,6 +71,10 @@ __all__ = ["CACHE_ENV_VAR", "KnowledgeSize", "cache_key", "clear_memory_cache", 
            "surrogate_doe", "surrogate_healthy", "surrogate_knowledge", "training_indicators"]
 
 _FORMAT = 1
+
+#: Parts of the package whose source decides what a simulated product holds (code_fingerprint).
+_PRODUCT_SOURCES = ("physics", "flights", "indicators", "datasets", "diagnosis", "envs", "scenarios",
+                    "taxonomy.py")
 _MEMORY: OrderedDict[str, object] = OrderedDict()
 _MEMORY_SIZE = 64
 _MEMORY_GUARD = threading.Lock()
@@ -269,7 +277,8 @@ def cache_key(kind: str, scenario, *, flight_minutes: float | None = None, **par
     content = sc.to_dict()
     content.pop("description", None)
     minutes = float(sc.mission.duration_min if flight_minutes is None else flight_minutes)
-    material = {"kind": kind, "format": _FORMAT, "package": __version__, "scenario": content,
+    material = {"kind": kind, "format": _FORMAT, "package": __version__, "code": code_fingerprint(),
+                "scenario": content,
                 "flight_minutes": minutes, "params": params, "indicators": list(ALL_INDICATOR_NAMES)}
     text = json.dumps(material, sort_keys=True, default=repr, allow_nan=True)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
@@ -317,10 +326,38 @@ def content_key(kind: str, recipe, **params) -> str:
     from fuelhm_bench import __version__
     from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES
 
-    material = {"kind": kind, "format": _FORMAT, "package": __version__, "recipe": _canonical(recipe),
-                "params": params, "indicators": list(ALL_INDICATOR_NAMES)}
+    material = {"kind": kind, "format": _FORMAT, "package": __version__, "code": code_fingerprint(),
+                "recipe": _canonical(recipe), "params": params, "indicators": list(ALL_INDICATOR_NAMES)}
     text = json.dumps(material, sort_keys=True, allow_nan=True)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """SHA-256 of the Python source of every module that builds a product (``_PRODUCT_SOURCES``).
+
+    Part of every cache key: an entry is read only by the code that wrote it.
+    """
+    return source_digest(Path(__file__).resolve().parent.parent, _PRODUCT_SOURCES)
+
+
+def source_digest(root, parts) -> str:
+    """SHA-256 of the ``*.py`` files under ``root / part`` for each part (a folder or one file).
+
+    Files are taken in sorted order of their path relative to ``root``, each with that path
+    and its bytes, so the digest is the same on any machine for the same source. A missing
+    part contributes nothing.
+    """
+    root = Path(root)
+    files = []
+    for part in parts:
+        path = root / part
+        files.extend([path] if path.is_file() else sorted(path.rglob("*.py")))
+    digest = hashlib.sha256()
+    for path in sorted(files, key=lambda f: f.relative_to(root).as_posix()):
+        digest.update(path.relative_to(root).as_posix().encode("utf-8") + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()
 
 
 def default_cache_dir() -> Path:
