@@ -157,7 +157,7 @@ def test_cli_json_prints_one_object_and_out_writes_the_report(overlap_file, tmp_
     path, case = overlap_file
     out = tmp_path / "report"
     code = main(["discrepancy", str(path), "--json", "--out", str(out), "--seed", "2",
-                 "--candidates", "spool_overlap,lvdt_lag,spool_flow_force"])
+                 "--candidates", "spool_overlap,lvdt_lag,torque_motor_hysteresis"])
     captured = capsys.readouterr()
     assert code == 0
     payload = json.loads(captured.out)  # exactly one JSON object, nothing else on stdout
@@ -167,7 +167,7 @@ def test_cli_json_prints_one_object_and_out_writes_the_report(overlap_file, tmp_
     assert payload["effect"] == "spool_overlap"
     assert payload["parameters"]["overlap_m"]["unit"] == "m"
     assert payload["gap_after"] <= 0.5 * payload["gap_before"]
-    assert {r["effect"] for r in payload["ranking"]} == {"spool_overlap", "lvdt_lag", "spool_flow_force", "none"}
+    assert {r["effect"] for r in payload["ranking"]} == {"spool_overlap", "lvdt_lag", "torque_motor_hysteresis", "none"}
     assert all({"effect", "bic", "gap_after"} <= set(r) for r in payload["ranking"])
     assert "split:" in captured.err  # logs go to stderr
     for name in ("report.md", "augmented_model.yaml", "result.json", "curves.png", "residual_map.png", "regions.png"):
