@@ -117,24 +117,34 @@ def test_dask_loopback_cluster_runs_the_board(small_board, tmp_path):
 
 
 def test_raw_signal_method_gets_a_leaderboard_row(small_board, tmp_path):
-    """The raw-signal baseline from the config file to a stored, scored row (physics: it gets its flights);
-    at surrogate fidelity its row says why it was refused, and the other entry's row is unaffected."""
-    import dataclasses
-
-    from fuelhm_bench.benchmark.leaderboard import LeaderboardEntry
-
-    raw = LeaderboardEntry("fuelhm_baselines.raw_tracking:RawTrackingMethod")
-    board = dataclasses.replace(small_board, methods=(small_board.methods[0], raw))
-    rows = run_board(board, tmp_path / "physics", flight_minutes=FLIGHT_MINUTES, log=lambda s: None)
+    """The raw-signal baseline from the config file to a stored, scored row (physics: it gets its flights)."""
+    rows = run_board(_with_raw(small_board), tmp_path / "physics", flight_minutes=FLIGHT_MINUTES, log=lambda s: None)
     got = rows.set_index("method")
     assert got.loc["fuelhm_baselines.raw_tracking:RawTrackingMethod", "status"] == "ok"
     assert np.isfinite(got.loc["fuelhm_baselines.raw_tracking:RawTrackingMethod", "summary_score"])
-    surrogate = dataclasses.replace(board, fidelity="surrogate")
+
+
+@pytest.mark.slow  # builds the surrogate (about 10 s); the harness's refusal runs by default in test_benchmark_raw
+def test_raw_signal_method_is_refused_on_a_surrogate_board(small_board, tmp_path):
+    """At surrogate fidelity the raw method's row says why it was refused; the other entry's row is unaffected."""
+    import dataclasses
+
+    surrogate = dataclasses.replace(_with_raw(small_board), fidelity="surrogate")
     rows = run_board(surrogate, tmp_path / "surrogate", flight_minutes=FLIGHT_MINUTES,
                      log=lambda s: None).set_index("method")
     assert rows.loc["fuelhm_baselines.raw_tracking:RawTrackingMethod", "status"] == "refused"
     assert "raw" in rows.loc["fuelhm_baselines.raw_tracking:RawTrackingMethod", "message"]
     assert rows.loc["fuelhm_baselines.trivial:NullMethod", "status"] == "ok"
+
+
+def _with_raw(board):
+    """The board's first entry and the raw-signal baseline."""
+    import dataclasses
+
+    from fuelhm_bench.benchmark.leaderboard import LeaderboardEntry
+
+    raw = LeaderboardEntry("fuelhm_baselines.raw_tracking:RawTrackingMethod")
+    return dataclasses.replace(board, methods=(board.methods[0], raw))
 
 
 @pytest.mark.slow  # about 2 minutes on the loaded 2-core machine (three runs of a subprocess leaderboard)
