@@ -394,6 +394,9 @@ class CandidateOutcome:
         Reduction of the held-out gap *above its noise floor* relative to the same reference,
         ``1 - sqrt(g^2 - f^2) / sqrt(g_ref^2 - f^2)``, ``f`` the smaller of the two models' floors
         (0 when the reference has no excess; :func:`excess_reduction`) [-].
+    heldout_rss, heldout_n : tuple
+        Per held-out flight, the sum of squared velocity residuals of this fit over the scored samples
+        [(mm/s)^2] and their number (:func:`heldout_rss_by_flight`): the unbinned held-out misfit.
     """
 
     effect: str
@@ -414,6 +417,8 @@ class CandidateOutcome:
     gap_reduction_free: float = float("nan")
     stopped_early: bool = False
     excess_reduction: float = float("nan")
+    heldout_rss: tuple = ()
+    heldout_n: tuple = ()
 
     @property
     def label(self) -> str:
@@ -434,6 +439,7 @@ class CandidateOutcome:
                                                    else self.gap_reduction_free),
             "stopped_early": self.stopped_early,
             "gap_reduction_above_floor": None if math.isnan(self.excess_reduction) else self.excess_reduction,
+            "heldout_rss_by_flight": list(self.heldout_rss), "heldout_samples_by_flight": list(self.heldout_n),
         }
 
 
@@ -798,11 +804,24 @@ def heldout_models(unit_models: dict, fleet, held_sets: dict) -> dict:
     return {k: unit_models.get(k, fleet) for k in held_sets}
 
 
+def heldout_rss_by_flight(held: rp.ReplaySet, v: np.ndarray) -> tuple:
+    """Sum of squared velocity residuals ``v_meas - v`` over the scored, finite samples of each held-out
+    flight, and their counts: ``(rss per flight [(mm/s)^2], samples per flight)`` (tuples, in the order
+    of ``held.flight_ids``). The sample-wise (unbinned) held-out misfit of a model."""
+    r = held.v_meas_mm_s - v
+    ok = held.scored & np.isfinite(r)
+    nf = len(held.flight_ids)
+    rss = np.bincount(held.flight[ok], weights=r[ok] * r[ok], minlength=nf)
+    cnt = np.bincount(held.flight[ok], minlength=nf)
+    return tuple(float(x) for x in rss), tuple(int(x) for x in cnt)
+
+
 def _fit_candidate(cand: EffectCandidate, base_values: dict, fit_sets: dict, held_sets: dict, start_model,
                    parameters: tuple, iterations: int, curve: CurveConfig,
                    extra_start: tuple | None = None,
-                   stop: EarlyStop | None = None) -> tuple[JointFit, float, float, float]:
-    """Multi-start grid, joint fit, held-out gap. Returns (fit, held-out gap, seconds, the gap's noise floor).
+                   stop: EarlyStop | None = None) -> tuple[JointFit, float, float, float, tuple]:
+    """Multi-start grid, joint fit, held-out gap. Returns (fit, held-out gap, seconds, the gap's noise floor,
+    :func:`heldout_rss_by_flight` of the fit on the held-out flights).
 
     Start points: every grid point of the effect, combined with two sets of unit values --
     the recalibrated ones (which may have drifted to mimic the missing effect) and the input
@@ -839,7 +858,7 @@ def _fit_candidate(cand: EffectCandidate, base_values: dict, fit_sets: dict, hel
     v = np.concatenate(rp.replay_batch([hm[k] for k in held_sets], list(held_sets.values())))
     g = gap(merged, v, curve)
     floor = gap_noise_floor(merged, v, curve, correlation_time([merged], [v]))
-    return res, g, time.perf_counter() - t0, floor
+    return res, g, time.perf_counter() - t0, floor, heldout_rss_by_flight(merged, v)
 
 
 _WORKER: dict = {}
@@ -1158,7 +1177,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     say(f"held-out gap after recalibration: {g_recal:.3f} mm/s")
 
     outcomes = [CandidateOutcome("none", {}, bic0, 0.0, base.rss, g_recal, 0.0, False, base.passes, 0.0,
-                                 base.unit_values)]
+                                 base.unit_values, **dict(zip(("heldout_rss", "heldout_n"),
+                                                              heldout_rss_by_flight(held, v_recal))))]
     fits: dict = {}  # label -> (JointFit, held-out gap, candidate, held paths, parameters)
     cur_bounded = [False]  # whether the fits being collected are kept within the dispersion
 
@@ -1168,7 +1188,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         for cand in cands:
             if cand.effect not in round_results:
                 continue
-            res, g, sec, fl = round_results[cand.effect]
+            res, g, sec, fl, hr = round_results[cand.effect]
             bic = noise.bic(res.rss, res.n_parameters)
             eff_model = res.unit_models[next(iter(res.unit_models))].effect(cand.effect)
             red = 1.0 - g / ref_gap if ref_gap > 0 else 0.0
@@ -1179,7 +1199,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             oc = CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, ref_bic - bic, res.rss,
                                   g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag,
                                   bounded=bounded or cur_bounded[0], stopped_early=res.message == "stopped early",
-                                  excess_reduction=excess_reduction(g, fl, ref_gap, ref_floor), **extra)
+                                  excess_reduction=excess_reduction(g, fl, ref_gap, ref_floor),
+                                  heldout_rss=hr[0], heldout_n=hr[1], **extra)
             label = oc.label
             fits[(tag, label)] = (res, g, cand, held_paths, fit_params)
             out.append(oc)
@@ -1217,7 +1238,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             f"dBIC {bic0 - bic_b:.1f} vs the free recalibration")
         outcomes.append(CandidateOutcome("none", {}, bic_b, bic0 - bic_b, b_base.rss, g_b,
                                          1.0 - g_b / g_recal if g_recal > 0 else 0.0, False, b_base.passes, 0.0,
-                                         b_base.unit_values, bounded=True))
+                                         b_base.unit_values, bounded=True,
+                                         **dict(zip(("heldout_rss", "heldout_n"), heldout_rss_by_flight(held, v_b)))))
         results_b = {c.effect: done["bounded:" + c.effect] for c in cands}
         cur_bounded[0] = True
         outcomes += collect(results_b, (), b_params, bic_b, g_b, floor_b, "1", bounded=True, free=(bic0, g_recal))

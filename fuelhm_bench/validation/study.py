@@ -82,9 +82,11 @@ def diagnostics(r) -> dict:
     from fuelhm_bench.calibration.discrepancy import correlation_time
 
     v = r.v_heldout["recalibrated"]
-    floor_recal = gap_noise_floor(r.heldout, v, r.curve, correlation_time([r.heldout], [v]))
+    tau_held = correlation_time([r.heldout], [v])
+    floor_recal = gap_noise_floor(r.heldout, v, r.curve, tau_held)
     out = r.as_json()
     out["gap_floor_recalibrated"] = floor_recal
+    out["heldout_tau_recalibrated"] = tau_held
     out["curve_rms"] = gap(r.heldout, np.zeros_like(v), r.curve)
     out["ranking_units"] = [{"effect": c.effect, "held": list(c.held), "tag": c.tag,
                              "unit_values": {str(k): v for k, v in c.unit_values.items()}} for c in r.ranking]
