@@ -397,6 +397,8 @@ class CandidateOutcome:
     heldout_rss, heldout_n : tuple
         Per held-out flight, the sum of squared velocity residuals of this fit over the scored samples
         [(mm/s)^2] and their number (:func:`heldout_rss_by_flight`): the unbinned held-out misfit.
+    heldout_floor : float
+        Noise floor of this fit's held-out gap [mm/s] (NaN when not computed).
     """
 
     effect: str
@@ -419,6 +421,7 @@ class CandidateOutcome:
     excess_reduction: float = float("nan")
     heldout_rss: tuple = ()
     heldout_n: tuple = ()
+    heldout_floor: float = float("nan")
 
     @property
     def label(self) -> str:
@@ -432,7 +435,7 @@ class CandidateOutcome:
         return {
             "effect": self.effect, "held_at_nominal": list(self.held),
             "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")} for k, v in self.parameters.items()},
-            "bic": self.bic, "delta_bic": self.delta_bic, "gap_after": self.gap_after,
+            "bic": self.bic, "delta_bic": self.delta_bic, "rss": self.rss, "gap_after": self.gap_after,
             "gap_reduction": self.gap_reduction, "eligible": self.eligible, "within_dispersion": self.bounded,
             "delta_bic_vs_free_recalibration": None if math.isnan(self.delta_bic_free) else self.delta_bic_free,
             "gap_reduction_vs_free_recalibration": (None if math.isnan(self.gap_reduction_free)
@@ -440,6 +443,7 @@ class CandidateOutcome:
             "stopped_early": self.stopped_early,
             "gap_reduction_above_floor": None if math.isnan(self.excess_reduction) else self.excess_reduction,
             "heldout_rss_by_flight": list(self.heldout_rss), "heldout_samples_by_flight": list(self.heldout_n),
+            "heldout_floor": None if math.isnan(self.heldout_floor) else self.heldout_floor,
         }
 
 
@@ -1200,7 +1204,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                                   g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag,
                                   bounded=bounded or cur_bounded[0], stopped_early=res.message == "stopped early",
                                   excess_reduction=excess_reduction(g, fl, ref_gap, ref_floor),
-                                  heldout_rss=hr[0], heldout_n=hr[1], **extra)
+                                  heldout_rss=hr[0], heldout_n=hr[1], heldout_floor=fl, **extra)
             label = oc.label
             fits[(tag, label)] = (res, g, cand, held_paths, fit_params)
             out.append(oc)
@@ -1238,7 +1242,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             f"dBIC {bic0 - bic_b:.1f} vs the free recalibration")
         outcomes.append(CandidateOutcome("none", {}, bic_b, bic0 - bic_b, b_base.rss, g_b,
                                          1.0 - g_b / g_recal if g_recal > 0 else 0.0, False, b_base.passes, 0.0,
-                                         b_base.unit_values, bounded=True,
+                                         b_base.unit_values, bounded=True, heldout_floor=floor_b,
                                          **dict(zip(("heldout_rss", "heldout_n"), heldout_rss_by_flight(held, v_b)))))
         results_b = {c.effect: done["bounded:" + c.effect] for c in cands}
         cur_bounded[0] = True
