@@ -1468,5 +1468,5 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "EarlyStop", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
-           "correlation_time", "effect_intervals", "excess_reduction", "find_discrepancy", "heldout_likelihood_gain", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
+           "correlation_time", "effect_intervals", "excess_reduction", "find_discrepancy", "heldout_likelihood_gain", "heldout_rss_by_flight", "is_eligible", "noise_model", "split_fit_holdout", "trades_off",
            "best_explanation"]
