@@ -5,7 +5,7 @@ Run as a command (it takes tens of minutes; it is not part of the test run)::
     python -m fuelhm_bench.validation.study --out study.csv [--units 4 --flights 3 --minutes 10] [--cases ...]
         [--seed-offset 1000] [--dump DIR]
     python -m fuelhm_bench.validation.study --markdown study*.csv     # the table of docs/discrepancy.md
-    python -m fuelhm_bench.validation.study --why DIR                 # per-case diagnosis from --dump
+    python -m fuelhm_bench.validation.study --why DIR [DIR ...]       # per-case diagnosis from --dump
     python -m fuelhm_bench.validation.study --law-check rod_friction  # library law vs the look-alike
 
 Each case simulates a fleet with :func:`~fuelhm_bench.validation.altsim.simulate_flights`
@@ -317,7 +317,7 @@ def main(argv=None) -> int:
     p.add_argument("--dump", default=None, help="directory for each case's full diagnostics (JSON)")
     p.add_argument("--seed-offset", type=int, default=0, help="added to every case's seed (held-out replicates)")
     p.add_argument("--force", action="store_true")
-    p.add_argument("--why", default=None, help="only print the diagnosis table of a --dump directory")
+    p.add_argument("--why", nargs="+", default=None, help="only print the diagnosis table of --dump directories")
     p.add_argument("--markdown", nargs="*", default=None,
                    help="only print the markdown table of these CSV files of earlier runs (then --out is ignored)")
     p.add_argument("--law-check", default=None, choices=sorted(LAW_CHECKS),
@@ -332,7 +332,7 @@ def main(argv=None) -> int:
     if a.why:
         import json
 
-        dumps = [json.loads(f.read_text()) for f in sorted(Path(a.why).glob("*.json"))]
+        dumps = [json.loads(f.read_text()) for d in a.why for f in sorted(Path(d).glob("*.json"))]
         print(why_table(dumps))
         return 0
     if a.markdown is not None:
