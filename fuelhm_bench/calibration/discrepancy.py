@@ -26,7 +26,9 @@ Given measured healthy flights and a model (nominal by default):
    to recalibration alone. Otherwise the answer is ``none``. The held-out condition is the
    one that matters in practice: the fit-flight likelihood of a wrong candidate still rises
    when its parameters can soak up some unit-specific misfit (BIC differences of hundreds on
-   healthy data), but that gain does not carry over to other flights.
+   healthy data), but that gain does not carry over to other flights. The held-out condition can
+   also be met sample by sample (``min_heldout_rss_reduction``: the held-out residual sum of
+   squares, which sees what the binned gap's cell means do not).
 6. **Add it**: the augmented model (fleet mean of the unit values, plus the effect) is
    returned for :func:`~fuelhm_bench.physics.model.save_model`; gaps before (input model),
    after recalibration and after augmentation are all measured on the held-out flights.
@@ -139,8 +141,8 @@ class DiscrepancyConfig:
         recalibration folds into the binned curve (rod friction into the null slot width) but whose
         dynamics it cannot fold (reversals, slow motions) closes little of the gap while predicting the
         held-out samples much better (altsim friction 500 N: 12 % of the excess, 52 % of the held-out
-        RSS; healthy altsim data: the best wrong candidate 9-11 %; docs/discrepancy.md section 10, sixth
-        round). None: the binned condition only (the fifth-round rule).
+        RSS; healthy and outside-library altsim data: the best wrong candidate 9-18 %; docs/discrepancy.md
+        section 10, sixth round). None: the binned condition only (the fifth-round rule).
     equivalence_margin : float, default=0.1
         An eligible candidate whose held-out gap reduction is within this of the selected one's
         is reported as an equivalent explanation.
