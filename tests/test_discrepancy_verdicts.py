@@ -244,6 +244,23 @@ def test_forward_selection_names_two_altsim_effects_with_their_shares():
     assert r.gap_after < 2.0 * r.gap_floor
 
 
+@pytest.mark.slow
+def test_forward_selection_stops_at_a_remainder_of_structural_size_once_the_score_is_on_scale(monkeypatch):
+    # The two-effect data above: on 2 x 2 flights of 4 min the misfit score is far below its calibrated
+    # scale, so the search for a second member runs (the test above). Declaring these held-out frames
+    # enough for the score's scale makes the gate apply: after the lag the remainder's score is under
+    # unexplained_score with no value beyond absorbed_z, so nothing further is searched.
+    import fuelhm_bench.calibration.discrepancy as d
+
+    _, flights = _flights(AltEffects(lvdt_lag_s=0.05, hysteresis_a=3e-4), seed=41)
+    cfg = dataclasses.replace(SMALL, candidates=("lvdt_lag", "torque_motor_hysteresis", "spool_overlap"))
+    monkeypatch.setattr(d, "SCORE_SCALE_FRAMES", 1)
+    lines = []
+    r = find_discrepancy(flights, config=cfg, log=lines.append)
+    assert [m.effect for m in r.effect_set] == ["lvdt_lag"]
+    assert any("no further effect searched" in line and "misfit score" in line for line in lines), lines
+
+
 def test_early_stop_drops_a_fit_that_cannot_earn_its_parameters():
     from fuelhm_bench.calibration.discrepancy import EarlyStop, NoiseModel
 

@@ -72,6 +72,9 @@ from fuelhm_bench.taxonomy import EFFECT_IDS
 #: Misfit score (mean z^2 of the curve cells, :mod:`~fuelhm_bench.calibration.regions`) of the
 #: recalibrated model on the held-out flights above which a disagreement is reported as significant.
 SIGNIFICANT_SCORE = 3.0
+#: Held-out frames from which the misfit score is on the scale of ``unexplained_score`` (its calibration
+#: used the default ``heldout_max_frames`` cap of 200,000 frames, reached from about 12 flights of 10 min).
+SCORE_SCALE_FRAMES = 180_000
 
 #: Candidate fits use Broyden updates of the recalibration columns of the Jacobian
 #: (:func:`~fuelhm_bench.calibration.fit.fit_joint`).
@@ -126,6 +129,14 @@ class DiscrepancyConfig:
         structural mismatch alone, and a second member is as much a claim as the first).
     continue_ratio : float, default=1.5
         The forward selection stops when the held-out gap is below this multiple of its noise floor.
+        On held-out data of at least ``SCORE_SCALE_FRAMES`` replayed frames (where the misfit score is
+        on the scale ``unexplained_score`` was calibrated at), it also stops when what the set leaves
+        would not make the verdict ``unexplained``: misfit score below ``unexplained_score`` and no
+        value of the set's fit ``absorbed_z`` sigmas or more from the input model. Such a remainder is
+        what a plausible but different model leaves; a further member would be fitted to structural
+        mismatch, and each search refits every remaining candidate (on the altsim friction benchmark,
+        after ``rod_friction`` is named, a search in the direct solver that added nothing doubled the
+        cost). On smaller data the score cannot tell, and the search runs.
     reduction_above_floor : bool, default=True
         Measure the held-out reductions of ``min_gap_reduction`` and ``min_step_reduction`` on the part
         of the gap above its noise floor, ``sqrt(g^2 - f^2)`` (:func:`excess_reduction`), instead
@@ -1334,6 +1345,9 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     # the BIC improves by more than the threshold and the held-out gap shrinks by min_step_reduction.
     members: list[SetMember] = []
     equivalents: list[Equivalent] = []
+    fleet_models = {k: (base.unit_models.get(k, fleet0)) for k in held_sets}
+    levels = sample_levels(held, fleet_models,
+                           lambda fi: NO_UNIT if held.unit_ids[fi] is None else held.unit_ids[fi])
     cur = {"fit": base, "gap": g_recal, "bic": bic0, "model": fleet0, "params": params, "held": ()}
     round_outcomes = [c for c in outcomes if c.effect != "none"]
     round_rule = rule
@@ -1366,6 +1380,17 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             say(f"held-out gap {g_new:.3f} mm/s within {config.continue_ratio:g}x its noise floor "
                 f"({floor_cur:.3f}): no further effect searched")
             break
+        # On data large enough for the misfit score to be on its calibrated scale, a remainder that would
+        # not make the verdict 'unexplained' (score under unexplained_score, no value beyond absorbed_z)
+        # is what a plausible but different model leaves: nothing further is searched in it.
+        if v_input.size >= SCORE_SCALE_FRAMES:
+            score_cur = region_map(held, v_cur, levels, cal.curve, noise.tau).score
+            if score_cur < config.unexplained_score and not absorbing_parameters(
+                    res.unit_values, start, z_max=config.absorbed_z):
+                say(f"what the set leaves is at the level of a plausible model's mismatch (misfit score "
+                    f"{score_cur:.1f} < {config.unexplained_score:g}, no value beyond {config.absorbed_z:g} "
+                    f"sigmas): no further effect searched")
+                break
         over_k = {"unit_values": res.unit_values, "start_model": new_model, "parameters": fit_params,
                   "stop": stop_rule(best.bic)}
         results_k = _run_tasks(_candidate_tasks(remaining, lambda e, done, o=over_k: o), payload, config.n_jobs)
@@ -1388,9 +1413,6 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     total = g_recal - g_after
     members = [dataclasses.replace(m, share=((m.gap_before - m.gap_after) / total if total > 0 else float("nan")))
                for m in members]
-    fleet_models = {k: (base.unit_models.get(k, fleet0)) for k in held_sets}
-    levels = sample_levels(held, fleet_models,
-                           lambda fi: NO_UNIT if held.unit_ids[fi] is None else held.unit_ids[fi])
     maps = {"input": region_map(held, v_input, levels, cal.curve, noise.tau),
             "recalibrated": region_map(held, v_recal, levels, cal.curve, noise.tau),
             "augmented": region_map(held, v_after, levels, cal.curve, noise.tau)}
