@@ -245,13 +245,15 @@ def _discrepancy_markdown(result, model_file: str, data_name: str) -> str:
               f"time tau = {r.noise.tau:.1f} samples, n = {r.noise.n}, n_eff = n / tau = {r.noise.n_eff:.0f}; "
               "BIC = n_eff ln(RSS/n) + k ln(n_eff).", "",
               "| rank | effect | BIC | dBIC vs none (fitted the same way) | held-out gap [mm/s] | "
-              "reduction vs recalibrated | eligible "
+              "reduction vs recalibrated | held-out RSS reduction (log-likelihood gain) | eligible "
               "| parameters |",
-              "|---|---|---|---|---|---|---|---|"]
+              "|---|---|---|---|---|---|---|---|---|"]
     for j, c in enumerate(r.ranking, 1):
         params = ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
+        rss = "-" if c.heldout_rss_reduction != c.heldout_rss_reduction else (
+            f"{100 * c.heldout_rss_reduction:+.0f} % ({c.heldout_gain:+.0f})")
         lines.append(f"| {j} | `{c.label}` | {c.bic:.1f} | {c.delta_bic:.1f} | {c.gap_after:.3f} | "
-                     f"{100 * c.gap_reduction:+.0f} % | {'yes' if c.eligible else 'no'} | {params} |")
+                     f"{100 * c.gap_reduction:+.0f} % | {rss} | {'yes' if c.eligible else 'no'} | {params} |")
     lines += ["", "## Curves (held-out flights)", "", "![curves](curves.png)", "",
               "## Residual maps", "", "Mean residual (measured - model) per current bin and current direction:", "",
               "![residual map](residual_map.png)", "",

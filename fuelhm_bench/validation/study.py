@@ -5,7 +5,7 @@ Run as a command (it takes tens of minutes; it is not part of the test run)::
     python -m fuelhm_bench.validation.study --out study.csv [--units 4 --flights 3 --minutes 10] [--cases ...]
         [--seed-offset 1000] [--dump DIR]
     python -m fuelhm_bench.validation.study --markdown study*.csv     # the table of docs/discrepancy.md
-    python -m fuelhm_bench.validation.study --why DIR                 # per-case diagnosis from --dump
+    python -m fuelhm_bench.validation.study --why DIR [DIR ...]       # per-case diagnosis from --dump
     python -m fuelhm_bench.validation.study --law-check rod_friction  # library law vs the look-alike
 
 Each case simulates a fleet with :func:`~fuelhm_bench.validation.altsim.simulate_flights`
@@ -82,9 +82,11 @@ def diagnostics(r) -> dict:
     from fuelhm_bench.calibration.discrepancy import correlation_time
 
     v = r.v_heldout["recalibrated"]
-    floor_recal = gap_noise_floor(r.heldout, v, r.curve, correlation_time([r.heldout], [v]))
+    tau_held = correlation_time([r.heldout], [v])
+    floor_recal = gap_noise_floor(r.heldout, v, r.curve, tau_held)
     out = r.as_json()
     out["gap_floor_recalibrated"] = floor_recal
+    out["heldout_tau_recalibrated"] = tau_held
     out["curve_rms"] = gap(r.heldout, np.zeros_like(v), r.curve)
     out["ranking_units"] = [{"effect": c.effect, "held": list(c.held), "tag": c.tag,
                              "unit_values": {str(k): v for k, v in c.unit_values.items()}} for c in r.ranking]
@@ -163,15 +165,19 @@ def why_table(dumps) -> str:
     plausible (within-dispersion) recalibration's gap, the truth's candidate (free / plausible): its
     BIC gain, held-out reduction (of the whole gap, and in brackets of the part above the noise
     floor, which the rule's 50 % applies to when ``reduction_above_floor``) and fitted main parameter,
-    and the best reduction of a wrong candidate (the same two).
+    and the best reduction of a wrong candidate (the same two); then the sample-wise held-out RSS
+    reduction (``heldout_rss_reduction``, the rule's second path) of the truth's candidates and the largest
+    of a wrong candidate, free fits and plausible fits that beat the free recalibration's held-out RSS (a
+    plausible fit that does not cannot meet that path).
     """
     healthy = [d["gap_recalibrated"] for d in dumps if d["truth"] == "none"]
     level = sum(healthy) / len(healthy) if healthy else float("nan")
     lines = [f"structural level (mean recalibrated held-out gap of {len(healthy)} healthy data sets): {level:.3f} mm/s",
              "", "| case | verdict | recal gap (floor) | plausible recal gap | truth's candidate: dBIC, held-out "
-             "reduction, fitted main | best wrong candidate: reduction |", "|---|---|---|---|---|---|"]
+             "reduction, fitted main | best wrong candidate: reduction | truth's candidate: held-out RSS "
+             "reduction | best wrong candidate: held-out RSS reduction |", "|---|---|---|---|---|---|---|---|"]
     for d in dumps:
-        rk = d["ranking"]
+        rk = [_with_heldout_rss(c, d) for c in d["ranking"]]
         bn = [c for c in rk if c["effect"] == "none" and c.get("within_dispersion")]
         truths = d["truth"].split("+")
         main = d.get("main")
@@ -183,11 +189,43 @@ def why_table(dumps) -> str:
                              f"{100 * c['gap_reduction']:+.0f} %{_above(c)}" + (f", {p:.3g}" if p is not None else ""))
         wrong = [c for c in rk if c["effect"] not in truths + ["none"]]
         bw = max(wrong, key=lambda c: c["gap_reduction"]) if wrong else None
+        rss_t = "; ".join(f"{'plausible' if c.get('within_dispersion') else 'free'} {_rss(c)}" for c in rk
+                          if c["effect"] in truths and c.get("heldout_rss_reduction") is not None) or "-"
+        rss_w = [c for c in wrong if c.get("heldout_rss_reduction") is not None and (
+            not c.get("within_dispersion") or (c.get("heldout_rss_reduction_vs_free_recalibration") or -1.0) > 0)]
+        bw_rss = max(rss_w, key=lambda c: c["heldout_rss_reduction"]) if rss_w else None
         lines.append(f"| {d['case']} | `{d['verdict']}` | {d['gap_recalibrated']:.3f} "
                      f"({d['gap_floor_recalibrated']:.3f}) | "
                      + (f"{bn[0]['gap_after']:.3f}" if bn else "-") + " | " + ("; ".join(cells) or "-") + " | "
-                     + (f"{bw['effect']} {100 * bw['gap_reduction']:+.0f} %{_above(bw)}" if bw else "-") + " |")
+                     + (f"{bw['effect']} {100 * bw['gap_reduction']:+.0f} %{_above(bw)}" if bw else "-") + " | "
+                     + rss_t + " | "
+                     + (f"{bw_rss['effect']}{' (plausible)' if bw_rss.get('within_dispersion') else ''} "
+                        f"{_rss(bw_rss)}" if bw_rss else "-") + " |")
     return "\n".join(lines)
+
+
+def _with_heldout_rss(c: dict, d: dict) -> dict:
+    """A first-round ranking entry with its held-out RSS reduction and log-likelihood gain, computed from
+    the per-flight held-out RSS for dumps made before the rule stored them (None without those)."""
+    if c.get("heldout_rss_reduction") is not None or c["effect"] == "none" or not c.get("heldout_rss_by_flight"):
+        return c
+    import math
+
+    refs = {b: next((r for r in d["ranking"] if r["effect"] == "none" and bool(r.get("within_dispersion")) == b),
+                    None) for b in (False, True)}
+    ref, free = refs[bool(c.get("within_dispersion"))], refs[False]
+    rss, n = sum(c["heldout_rss_by_flight"]), sum(c["heldout_samples_by_flight"])
+    if ref is None or not rss > 0 or "heldout_tau_recalibrated" not in d:
+        return c
+    r_ref = sum(ref["heldout_rss_by_flight"])
+    return {**c, "heldout_rss_reduction": 1 - rss / r_ref,
+            "heldout_loglik_gain": n / d["heldout_tau_recalibrated"] / 2 * math.log(r_ref / rss),
+            "heldout_rss_reduction_vs_free_recalibration": 1 - rss / sum(free["heldout_rss_by_flight"])}
+
+
+def _rss(c: dict) -> str:
+    """``+x % (gain g)``: a ranking entry's held-out RSS reduction and log-likelihood gain."""
+    return f"{100 * c['heldout_rss_reduction']:+.1f} % ({c['heldout_loglik_gain']:+.0f})"
 
 
 def _above(c: dict) -> str:
@@ -279,7 +317,7 @@ def main(argv=None) -> int:
     p.add_argument("--dump", default=None, help="directory for each case's full diagnostics (JSON)")
     p.add_argument("--seed-offset", type=int, default=0, help="added to every case's seed (held-out replicates)")
     p.add_argument("--force", action="store_true")
-    p.add_argument("--why", default=None, help="only print the diagnosis table of a --dump directory")
+    p.add_argument("--why", nargs="+", default=None, help="only print the diagnosis table of --dump directories")
     p.add_argument("--markdown", nargs="*", default=None,
                    help="only print the markdown table of these CSV files of earlier runs (then --out is ignored)")
     p.add_argument("--law-check", default=None, choices=sorted(LAW_CHECKS),
@@ -294,7 +332,7 @@ def main(argv=None) -> int:
     if a.why:
         import json
 
-        dumps = [json.loads(f.read_text()) for f in sorted(Path(a.why).glob("*.json"))]
+        dumps = [json.loads(f.read_text()) for d in a.why for f in sorted(Path(d).glob("*.json"))]
         print(why_table(dumps))
         return 0
     if a.markdown is not None:
