@@ -10,7 +10,8 @@ the best one).
 effect                 fitted [range]                               held
 =====================  ==========================================  ==============================================
 ``spool_overlap``      ``overlap_m`` (log) [1e-7, 1e-4] m           --
-``spool_flow_force``   ``stiffness_ratio`` (log) [1e-3, 3]          --
+``spool_flow_force``   ``stiffness_ratio`` (log) [1e-3, 3],         --
+                       ``command_limit_ratio`` [1, 3]
 ``rod_friction``       ``coulomb_n`` (log) [1, 5000] N,             ``stribeck_velocity_m_s`` = 2 mm/s,
                        ``static_ratio`` [1, 3]                      ``viscous_n_s_m`` = 0
 ``lvdt_lag``           ``time_constant_s`` (log) [1e-4, 0.5] s      --
@@ -30,7 +31,11 @@ velocity quantum of the differentiated position (``q / (10 T)`` = 0.17 mm/s at 1
 recalibration fits per unit. The lower ends of the log ranges (the documented ranges are
 open at 0) are far below any visible magnitude. The reference of ``load_stiffness`` is
 searched over the stroke (a reference beyond it is a constant force, which the
-recalibrated load already holds).
+recalibrated load already holds). The flow force's command limit only acts where the
+command exceeds it (at a saturated current, about 1.5 x stroke for the nominal valve):
+above that its gradient is zero, so every stiffness start is tried with a limit near the
+stroke (1.05) and with one beyond any command (2.5); the starts lie inside the bounds
+(a start on a bound left the trust-region fit where it began).
 """
 
 from __future__ import annotations
@@ -87,8 +92,9 @@ def candidates(stroke_m: float = 0.06) -> dict[str, EffectCandidate]:
             "spool_overlap", (_p("spool_overlap", "overlap_m", "m", 0.3, 1e-7, 1e-4, log=True),), {},
             tuple({"overlap_m": v} for v in (2e-6, 8e-6, 3e-5))),
         "spool_flow_force": EffectCandidate(
-            "spool_flow_force", (_p("spool_flow_force", "stiffness_ratio", "-", 0.3, 1e-3, 3.0, log=True),), {},
-            tuple({"stiffness_ratio": v} for v in (0.03, 0.15, 0.6))),
+            "spool_flow_force", (_p("spool_flow_force", "stiffness_ratio", "-", 0.3, 1e-3, 3.0, log=True),
+                                 _p("spool_flow_force", "command_limit_ratio", "-", 0.1, 1.0, 3.0)), {},
+            tuple({"stiffness_ratio": v, "command_limit_ratio": r} for r in (1.05, 2.5) for v in (0.03, 0.15, 0.6))),
         "rod_friction": EffectCandidate(
             "rod_friction", (_p("rod_friction", "coulomb_n", "N", 0.3, 1.0, 5000.0, log=True),
                              _p("rod_friction", "static_ratio", "-", 0.1, 1.0, 3.0)),

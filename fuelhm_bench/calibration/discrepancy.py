@@ -82,7 +82,7 @@ BROYDEN = True
 
 #: Units of the effect parameters (for reports and JSON).
 PARAMETER_UNITS: dict[str, str] = {
-    "overlap_m": "m", "stiffness_ratio": "-", "coulomb_n": "N", "static_ratio": "-",
+    "overlap_m": "m", "stiffness_ratio": "-", "command_limit_ratio": "-", "coulomb_n": "N", "static_ratio": "-",
     "stribeck_velocity_m_s": "m/s", "viscous_n_s_m": "N s/m", "time_constant_s": "s",
     "stiffness_n_m": "N/m", "reference_m": "m", "width_a": "A",
     "leak_at_20c_m3_s_pa": "m3/(s Pa)", "slope_per_degc": "1/degC",

@@ -14,7 +14,9 @@ id                      equation
 ``spool_flow_force``    steady flow force acts as a centring spring on the spool:
                         ``x_c <- x_c / (1 + k_r * dp_e/70 bar * w(|x_c|)/w_null)``,
                         ``dp_e = dp_s - sgn(x_c) (p1 - p2)`` the summed drops of
-                        the two open metering edges (frame-start pressures)
+                        the two open metering edges (frame-start pressures);
+                        ``x_c`` first clipped at +/- r x stroke when
+                        ``command_limit_ratio`` r > 0
 ``rod_friction``        ``F = [F_c + (F_s - F_c) exp(-(v/v_s)^2)] sgn v + b v`` on the rod,
                         with stiction (the rod stays still while the available
                         force is within +/-F_s)
@@ -41,7 +43,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import ClassVar
 
-from fuelhm_bench.errors import ParameterError, UnknownNameError
+from fuelhm_bench.errors import ParameterError, UnknownNameError, range_error
 from fuelhm_bench.physics._validation import NON_NEGATIVE, check_fields
 from fuelhm_bench.taxonomy import EFFECT_IDS
 
@@ -71,18 +73,32 @@ class SpoolFlowForce:
     pressure drop (Merritt, *Hydraulic Control Systems*, chapter 5); the two open edges' drops sum
     to ``dp_s - sgn(x_c) (p1 - p2)`` (docs/physics.md §7).
 
+    Where the torque motor's authority ends decides what the flow force does at a saturated
+    current: with no command limit (the default), the command may exceed the spool stroke, and the
+    reduced command still drives the spool onto its stop, so the saturation flow is unchanged; with
+    ``command_limit_ratio`` = r >= 1, the command is clipped at +/- r x stroke *before* the flow force
+    acts (the pilot stage cannot push the spool further than that against its feedback spring), so
+    at saturation the spool stops short of the stroke and the saturation flow falls with the flow
+    force too.
+
     Parameters
     ----------
     stiffness_ratio : float, default=0.25
         Flow-force stiffness over feedback stiffness at 70 bar of summed edge drop and null slot
         width [-], in (0, 3].
+    command_limit_ratio : float, default=0.0
+        Torque-motor command limit over the spool stroke [-]: 0 (no limit) or in [1, 10].
     """
 
     id: ClassVar[str] = "spool_flow_force"
     stiffness_ratio: float = 0.25
+    command_limit_ratio: float = 0.0
 
     def __post_init__(self) -> None:
-        check_fields(self, {"stiffness_ratio": (0.0, 3.0, False)})
+        check_fields(self, {"stiffness_ratio": (0.0, 3.0, False), "command_limit_ratio": (0.0, 10.0, True)})
+        if 0.0 < self.command_limit_ratio < 1.0:
+            raise range_error("SpoolFlowForce.command_limit_ratio", "0 (no limit) or in [1, 10]",
+                              self.command_limit_ratio)
 
 
 @dataclass(frozen=True)

@@ -41,13 +41,13 @@ _K_NAMES = (
     "frame", "kp", "ki", "zmax", "dead_band", "isat", "dgain", "doff", "inb", "ksv", "spool_stroke",
     "rate", "half_play", "fric_num", "ff_ratio", "w_null", "w_out", "o_a", "o_b", "dps100", "faero100",
     "kx", "xref", "fc", "fs", "vs", "bv", "stroke", "noise", "quantum", "rmin", "rmax", "lagsel",
-    "direct", "endstops", "drvlag", "hyst",
+    "direct", "endstops", "drvlag", "hyst", "fflim",
 )
 K = {name: i for i, name in enumerate(_K_NAMES)}
 K_N = len(_K_NAMES)
 (K_FRAME, K_KP, K_KI, K_ZMAX, K_DB, K_ISAT, K_DGAIN, K_DOFF, K_INB, K_KSV, K_SSTROKE, K_RATE, K_HPLAY,
  K_FRICNUM, K_FF, K_WNULL, K_WOUT, K_OA, K_OB, K_DPS100, K_FAERO100, K_KX, K_XREF, K_FC, K_FS, K_VS, K_BV,
- K_STROKE, K_NOISE, K_Q, K_RMIN, K_RMAX, K_LAGSEL, K_DIRECT, K_ENDSTOPS, K_DRVLAG, K_HYST) = range(K_N)
+ K_STROKE, K_NOISE, K_Q, K_RMIN, K_RMAX, K_LAGSEL, K_DIRECT, K_ENDSTOPS, K_DRVLAG, K_HYST, K_FFLIM) = range(K_N)
 
 #: Velocity table grid: spool positions (fraction of stroke) x N2 nodes.
 TABLE_NX = 801
@@ -119,6 +119,7 @@ def pack_model(model, fuel_temp_degc: float = 20.0) -> tuple[np.ndarray, np.ndar
     k[K_FRICNUM] = sv.spool_friction_n * sv.pilot_error_span_m / (sv.spool_end_area_m2 * sv.pilot_supply_fraction)
     ff = model.effect("spool_flow_force")
     k[K_FF] = ff.stiffness_ratio if ff else 0.0
+    k[K_FFLIM] = ff.command_limit_ratio * sv.spool_stroke_m if ff and ff.command_limit_ratio > 0.0 else math.inf
     k[K_WNULL] = sv.slot_width_null_m
     k[K_WOUT] = sv.slot_width_outer_m
     k[K_OA] = c[cyl.C_O_A]
@@ -169,11 +170,18 @@ def spool_command(i_cmd: float, dps: float, k, dp12: float = 0.0) -> float:
     The flow force (Merritt's steady flow force, a centring force proportional to the opening and to
     the pressure drop across each open metering edge) scales with the sum of the two open edges'
     drops, ``(p_s - p_r) - sgn(x_c) (p1 - p2)``: ``dp12`` is the chamber pressure difference
-    ``p1 - p2`` [Pa] (the previous frame's, 0 when unknown).
+    ``p1 - p2`` [Pa] (the previous frame's, 0 when unknown). With the flow force on and a command
+    limit (``command_limit_ratio`` > 0), the command is clipped at that limit before the flow force
+    reduces it.
     """
     i_coil = k[K_DGAIN] * i_cmd + k[K_DOFF]
     x_c = k[K_KSV] * (i_coil - k[K_INB])
     if k[K_FF] > 0.0:
+        # the torque motor's authority (command_limit_ratio): clipped before the flow force acts
+        if x_c > k[K_FFLIM]:
+            x_c = k[K_FFLIM]
+        elif x_c < -k[K_FFLIM]:
+            x_c = -k[K_FFLIM]
         drop = dps - dp12 if x_c >= 0.0 else dps + dp12
         if drop < 0.0:
             drop = 0.0

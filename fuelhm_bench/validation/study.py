@@ -238,7 +238,7 @@ def _above(c: dict) -> str:
 LAW_CHECKS = {
     "spool_overlap": ("spool_overlap", {"overlap_m": 15e-6}),
     "rod_friction": ("rod_friction", {"coulomb_n": 500.0, "static_ratio": 1.0}),
-    "spool_flow_force": ("spool_flow_force", {"stiffness_ratio": 0.12}),
+    "spool_flow_force": ("spool_flow_force", {"stiffness_ratio": 0.12, "command_limit_ratio": 1.0}),
     "lvdt_lag": ("lvdt_lag", {"time_constant_s": 0.05}),
     "load_stiffness": ("load_stiffness", {"stiffness_n_m": 3e4, "reference_m": 0.03}),
 }
