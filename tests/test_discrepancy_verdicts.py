@@ -133,6 +133,19 @@ def test_verdict_effect_names_an_lvdt_lag_of_altsim_data():
     assert named and not any(c.stopped_early for c in named)
 
 
+@pytest.mark.slow
+def test_verdict_effect_names_the_altsim_flow_force_with_its_command_limit():
+    """The altsim clips the spool command at the stroke before its flow force acts; the library's
+    candidate fits where its torque motor's authority ends (seventh round) and names the effect."""
+    _, flights = _flights(AltEffects(flow_force_ratio=0.12), seed=12)
+    cfg = dataclasses.replace(SMALL, candidates=("spool_flow_force", "spool_overlap", "load_stiffness"))
+    r = find_discrepancy(flights, config=cfg)
+    assert r.verdict == "effect", r.unexplained
+    assert [m.effect for m in r.effect_set] == ["spool_flow_force"]
+    assert r.parameters["stiffness_ratio"] == pytest.approx(0.12, rel=0.25)
+    assert r.parameters["command_limit_ratio"] < 1.3  # at the stroke, not beyond any command
+
+
 def test_verdict_unexplained_on_an_effect_outside_the_library():
     # A supply-pressure droop under flow: no library effect; the recalibration absorbs it into the
     # outer slot width and the aerodynamic load (far outside their dispersion).
