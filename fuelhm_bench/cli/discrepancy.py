@@ -15,8 +15,13 @@ def register(sub) -> None:
         description="Split the flights into fit and held-out flights, recalibrate the model per unit on the fit "
                     "flights, replay every flight through it to map where model and measurement disagree, fit "
                     "each candidate effect of the library jointly with the recalibration, rank the candidates by "
-                    "BIC and accept the best only if it also shrinks the gap on the held-out flights; the answer "
-                    "is an effect id or 'none'. --out DIR writes a Markdown report with figures and the augmented "
+                    "BIC and accept the best only if it also shrinks the gap on the held-out flights, then look for "
+                    "a second effect (forward selection). The verdict is 'effect' (a set of effects with their "
+                    "parameters and shares of the gap; look-alikes named as equivalents with the test that "
+                    "separates them), 'none' (what remains is at the level of healthy data from a plausible model) "
+                    "or 'unexplained' (a significant gap no candidate explains: where it is, and the terms a "
+                    "sparse regression of the residuals finds); recalibrated parameters beyond the manufacturing "
+                    "dispersion are flagged. --out DIR writes a Markdown report with figures and the augmented "
                     "model (YAML, loadable by 'simulate --model'); --json prints one JSON object on stdout.")
     p.add_argument("flights", help="measured healthy flights (.parquet, .csv, .csv.gz; format: docs/data-format.md)")
     p.add_argument("--model", metavar="YAML", help="model to examine (default: nominal)")
