@@ -173,6 +173,29 @@ def test_replay_splits_flights_at_time_gaps():
         rp.prepare_replay(flights + [slow])
 
 
+def test_replay_of_jittered_timestamps_says_how_irregular_the_sampling_is():
+    frame, _ = _flights(LoopModel(), n_flights=1, minutes=2.0)
+    jittered = frame.copy()
+    jittered["time_s"] += np.random.default_rng(0).uniform(-0.1, 0.1, len(frame)) * 0.01  # +/- 10 % of the frame
+    flights, _ = split_flights(jittered)
+    with pytest.raises(DataFormatError, match=r"% of the intervals between samples differ from the frame .* "
+                                              r"by more than 5 % \(ReplayConfig.frame_tolerance\)") as err:
+        rp.prepare_replay(flights)
+    assert "resample the flights onto a uniform time base" in str(err.value)
+    small = frame.copy()  # within the tolerance: scored as uniform
+    small["time_s"] += np.random.default_rng(0).uniform(-0.01, 0.01, len(frame)) * 0.01
+    assert rp.prepare_replay(split_flights(small)[0]).n_scored > 1000
+
+
+def test_replay_of_a_run_shorter_than_the_end_stop_dilation():
+    # A 10-sample run at the end stop, a gap, then a normal run: the stop mask keeps the run's length.
+    t = np.concatenate([np.arange(10) * 0.01, 1.0 + np.arange(2000) * 0.01])
+    pos = np.concatenate([np.zeros(10), 30.0 + 10.0 * np.sin(np.arange(2000) * 0.01)])
+    cur = np.concatenate([np.full(10, -2.0), 2.0 * np.cos(np.arange(2000) * 0.01)])
+    rs = rp.prepare_replay([FlightArrays(0, 0, t, cur, pos)])
+    assert rs.n_scored > 1000
+
+
 def test_recalibration_without_n2_uses_the_documented_constant():
     frame, _ = hidden_effect_flights(None, n_units=1, n_flights=2, minutes=3.0, seed=8)
     flights, _ = split_flights(frame.drop(columns=["n2_pct"]))

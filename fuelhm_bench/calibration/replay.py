@@ -272,7 +272,8 @@ def _run_samples(flight, a: int, b: int, frame_s: float, stroke_mm: float, cfg: 
     near_stop = (win.min(axis=1) <= cfg.end_stop_margin_mm) | (win.max(axis=1) >= stroke_mm - cfg.end_stop_margin_mm)
     k = int(math.ceil(cfg.end_stop_dilate_s / frame_s))
     if k > 0 and near_stop.any():  # the rod may touch the stop before the (lagged) measurement shows it
-        near_stop = np.convolve(near_stop.astype(float), np.ones(2 * k + 1), mode="same") > 0.5
+        # centred window of 2k+1 samples, n values even for a run shorter than the window
+        near_stop = np.convolve(near_stop.astype(float), np.ones(2 * k + 1), mode="full")[k:k + n] > 0.5
     at_limit = (cur >= i_hi - cfg.current_limit_margin_ma) | (cur <= i_lo + cfg.current_limit_margin_ma)
     stall = at_limit & (np.abs(np.nan_to_num(v)) < cfg.stall_velocity_mm_s)
     n2 = n2_pct[a:b]
@@ -350,13 +351,18 @@ def prepare_replay(flights, *, config: ReplayConfig = ReplayConfig(), stroke_m: 
     stroke_mm = 1e3 * stroke_m
     n2_measured = all("n2_pct" in f.extras for f in flights)
     pieces: list[dict] = []  # one per segment
+    n_intervals = n_irregular = longest_run = 0  # for the error message when nothing can be scored
     for fi, f in enumerate(flights):
         n2_pct = np.asarray(f.extras["n2_pct"], dtype=float) if n2_measured else np.full(f.n_samples,
                                                                                           cfg.n2_default_pct)
         phase = f.extras.get("phase")
         temp = f.extras.get("fuel_temp_degC")
         i_lo, i_hi = float(np.min(f.current_ma)), float(np.max(f.current_ma))
+        dt = np.diff(np.asarray(f.time_s, dtype=float))
+        n_intervals += dt.size
+        n_irregular += int(np.count_nonzero(np.abs(dt - frame_s) > cfg.frame_tolerance * frame_s))
         for a, b in _runs(np.asarray(f.time_s), frame_s, cfg):
+            longest_run = max(longest_run, b - a)
             r = _run_samples(f, a, b, frame_s, stroke_mm, cfg, n2_pct, i_lo, i_hi)
             mov, idl = _segments_of_run(r["valid"], r["moving"], warm, block, max_block)
             for kind, segs in (("moving", mov), ("idle", idl)):
@@ -380,10 +386,17 @@ def prepare_replay(flights, *, config: ReplayConfig = ReplayConfig(), stroke_m: 
                         "temp": None if temp is None else np.asarray(temp[a:b], dtype=float)[s0:s1],
                     })
     if not pieces:
+        need = 2 * warm + 2 * h + 1
+        sampling = ""
+        if n_intervals and longest_run < need:
+            sampling = (f" Sampling: {100.0 * n_irregular / n_intervals:.1f} % of the intervals between samples "
+                        f"differ from the frame ({frame_s:g} s, the median interval) by more than "
+                        f"{100.0 * cfg.frame_tolerance:g} % (ReplayConfig.frame_tolerance), and the longest uniform "
+                        f"run is {longest_run} samples: resample the flights onto a uniform time base.")
         raise DataFormatError(
             "No sample of the flights can be scored: every sample is masked (end stops, current limits, "
             "missing N2) or the flights are too short for the differentiator. The replay needs flights with "
-            f"runs of at least {2 * warm + 2 * h + 1} uniformly sampled frames away from the end stops.")
+            f"runs of at least {need} uniformly sampled frames away from the end stops.{sampling}")
     pieces = _select(pieces, cfg, frame_s, seed)
     return _assemble(pieces, flights, frame_s, cfg, n2_measured, h)
 
