@@ -96,10 +96,36 @@ def test_split_is_seeded_stratified_and_complete():
     assert {f.unit_id for f in fit} == {"U0", "U1", "U2"}  # every unit keeps fit flights
     again = split_fit_holdout(flights, 0.3, seed=4)
     assert [f.flight_id for f in again[1]] == [f.flight_id for f in held]
-    two = split_fit_holdout(flights[:2], 0.3, seed=0)
+    two = split_fit_holdout([flights[0], flights[3]], 0.3, seed=0)  # one unit, two flights
     assert len(two[0]) == 1 and len(two[1]) == 1
     with pytest.raises(DataFormatError, match="Too few flights to hold out"):
-        split_fit_holdout(flights[:1])
+        split_fit_holdout(flights[:1])  # one flight of 3 s: too short to cut in time
+    with pytest.raises(DataFormatError, match="Too few flights to hold out"):
+        split_fit_holdout(flights[:2])  # two units of one short flight each
+
+
+def test_split_cuts_single_flight_units_into_blocks():
+    # Every unit replays its held-out data through its own recalibrated model: a unit with one
+    # flight holds out blocks spread over that flight, never the whole flight (it would be replayed
+    # through the fleet's mean model, and its manufacturing dispersion would read as a discrepancy).
+    t = np.arange(0.0, 600.0, 0.01)  # 20 blocks of 30 s
+    one = [FlightArrays(i, f"U{i}", t, np.sin(t + i), np.cos(t)) for i in range(3)]
+    many = [FlightArrays(10 + i, "M", t, np.sin(t), np.cos(t)) for i in range(4)]
+    fit, held = split_fit_holdout(one + many, 0.3, seed=1)
+    assert {f.unit_id for f in held} == {"U0", "U1", "U2", "M"} == {f.unit_id for f in fit}
+    parts = {f.flight_id: f for f in held if f.unit_id != "M"}
+    assert set(parts) == {"0/held-out", "1/held-out", "2/held-out"}
+    part, rest = parts["0/held-out"], next(f for f in fit if f.flight_id == 0)
+    assert part.n_samples + rest.n_samples == t.size
+    blocks = np.unique(np.floor(part.time_s / 30.0))
+    assert blocks.size == 6 and blocks.min() >= 1 and np.diff(blocks).min() >= 2  # spread, not a tail
+    assert np.array_equal(np.sort(np.concatenate([part.time_s, rest.time_s])), t)
+    assert sum(f.unit_id == "M" for f in held) == 1  # round(0.3 * 4) of the multi-flight unit
+    fit1, held1 = split_fit_holdout(one[:1], 0.3)  # a single long flight is enough
+    assert [f.flight_id for f in fit1] == [0] and [f.flight_id for f in held1] == ["0/held-out"]
+    short = FlightArrays(5, "S", np.arange(0.0, 50.0, 0.01), np.zeros(5000), np.zeros(5000))
+    fit2, held2 = split_fit_holdout(many[:2] + [short], 0.3)  # two blocks only: kept for fitting
+    assert short in fit2 and all(f.unit_id == "M" for f in held2)
 
 
 def _outcome(effect, delta_bic, reduction, bic=None):
@@ -122,8 +148,10 @@ def test_decision_rule():
 
 def test_too_few_flights_and_no_transient_are_refused():
     _, flights, _ = _data(None)
+    one = flights[0]
+    short = one._take(np.flatnonzero(one.time_s - one.time_s[0] < 60.0))  # too short to cut into 3 blocks of 30 s
     with pytest.raises(DataFormatError, match="Too few flights to hold out: got 1"):
-        find_discrepancy(flights[:1], config=SMALL)
+        find_discrepancy([short], config=SMALL)
     t = np.arange(18000) * 0.01
     rng = np.random.default_rng(1)
     still = [FlightArrays(k, "U", t, 0.3 + 0.003 * rng.standard_normal(t.size),
@@ -203,6 +231,7 @@ def test_cli_bad_inputs_give_clear_messages(overlap_file, tmp_path, capsys):
     assert "missing the required column(s) ['current_mA']" in capsys.readouterr().err
     one = tmp_path / "one.parquet"
     full = pd.read_parquet(path)
-    write_flights(full[full["flight_id"] == full["flight_id"].iloc[0]], one)
+    first = full[full["flight_id"] == full["flight_id"].iloc[0]]
+    write_flights(first[first["time_s"] - first["time_s"].iloc[0] < 60.0], one)  # one flight, too short to cut
     assert main(["discrepancy", str(one)]) == 2
     assert "Too few flights to hold out" in capsys.readouterr().err

@@ -17,7 +17,7 @@ import pytest
 from fuelhm_bench.calibration.discrepancy import (CandidateOutcome, DiscrepancyConfig, excess_reduction, find_discrepancy,
                                                 heldout_likelihood_gain, heldout_rss_by_flight, is_eligible,
                                                 separating_test)
-from fuelhm_bench.calibration.flags import absorbing_parameters, dispersion_sigma
+from fuelhm_bench.calibration.flags import absorbing_parameters, dispersion_sigma, fleet_wide
 from fuelhm_bench.calibration.probe import sparse_probe
 from fuelhm_bench.calibration.recalibrate import CalibrationConfig, prepare_units
 from fuelhm_bench.errors import ParameterError
@@ -67,6 +67,25 @@ def test_flags_values_outside_the_dispersion():
     assert [(f.unit, f.path) for f in flags] == [(0, "servovalve.slot_width_outer_m")]
     assert flags[0].z == pytest.approx(-10.0)
     assert flags[0].as_json()["reading"] == "likely absorbing a missing effect"
+
+
+def test_only_parameters_beyond_the_threshold_in_several_units_count_fleet_wide():
+    nominal = LoopModel()
+    w = nominal.servovalve.slot_width_outer_m
+    d = nominal.cylinder.diaphragm_diameter_m
+    values = {u: {"servovalve.slot_width_outer_m": w * (0.88 if u < 2 else 0.97),  # -6 sigma in units 0 and 1
+                  "cylinder.diaphragm_diameter_m": d * (1.2 if u == 5 else 1.0)}  # one unit's outlier
+              for u in range(12)}
+    flags = absorbing_parameters(values, nominal, z_max=5.0)
+    assert {(f.unit, f.path) for f in flags} == {(0, "servovalve.slot_width_outer_m"),
+                                                 (1, "servovalve.slot_width_outer_m"),
+                                                 (5, "cylinder.diaphragm_diameter_m")}
+    kept = fleet_wide(flags, n_units=12)
+    assert {(f.unit, f.path) for f in kept} == {(0, "servovalve.slot_width_outer_m"),
+                                                (1, "servovalve.slot_width_outer_m")}
+    assert [f.path for f in kept] == [f.path for f in flags if f.path == "servovalve.slot_width_outer_m"]
+    one = absorbing_parameters({0: values[5]}, nominal, z_max=5.0)
+    assert fleet_wide(one, n_units=1) == one  # a single unit's flags are all it has
 
 
 def test_separating_tests_are_symmetric():

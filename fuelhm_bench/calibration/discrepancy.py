@@ -51,7 +51,7 @@ from fuelhm_bench.calibration.candidates import EffectCandidate, get_candidates
 from fuelhm_bench.calibration.curve import CurveConfig, gap, gap_metric_text, gap_noise_floor
 from fuelhm_bench.calibration.fit import JointFit, apply_values, fit_joint
 from fuelhm_bench.calibration.flags import (ParameterFlag, absorbing_parameters, at_limit, dispersion_sigma,
-                                            within_dispersion)
+                                            fleet_wide, within_dispersion)
 from fuelhm_bench.calibration.probe import ProbeResult, sparse_probe
 from fuelhm_bench.calibration.recalibrate import (
     NO_UNIT,
@@ -163,8 +163,11 @@ class DiscrepancyConfig:
         ... and the final model's held-out misfit score at least this (calibrated on healthy
         altsim data, docs/discrepancy.md section 5).
     absorbed_z : float, default=5.0
-        ... or a value of the final fit at least this many dispersion sigmas from the input model
-        (a disagreement absorbed by the recalibration that no candidate explains).
+        ... or values of the final fit at least this many dispersion sigmas from the input model,
+        for one parameter in at least two units (all units of a smaller fleet; ``flags.fleet_wide``):
+        a disagreement absorbed by the recalibration that no candidate explains. One unit's outlier
+        stays a flag (with 12 units of one flight, 96 fitted values, a healthy altsim fleet put one
+        diaphragm at -5.3 sigma).
     early_stop : bool, default=True
         End a candidate fit early when it cannot earn its parameters (:class:`EarlyStop`): after
         4 iterations, its BIC gain over its reference, extrapolated generously from its last
@@ -799,49 +802,98 @@ def describe_remainder(rmap, gap_mm_s: float, floor_mm_s: float, n_top: int = 3)
 
 
 # --------------------------------------------------------------------------- split
+#: A single-flight unit's flight is cut into blocks of this duration [s], about ``holdout_fraction``
+#: of them held out, spread over the flight (never the first block, which holds the start).
+SPLIT_BLOCK_S = 30.0
+
+
+def _block_split(flight, fraction: float):
+    """(fit part, held-out part) of one flight cut into blocks of :data:`SPLIT_BLOCK_S`, or None when
+    the flight has fewer than three blocks. About ``fraction`` of the blocks are held out, evenly
+    spread over blocks 1 .. n-1, so that the held-out data cover the flight's phases as the fit data
+    do (a held-out tail would be the descent alone, fitted from the climb and cruise). Both parts keep
+    the unit and the original times (the replay splits runs at the time jumps); the held-out part is
+    named ``"<flight_id>/held-out"``."""
+    t = np.asarray(flight.time_s, dtype=float)
+    block = np.floor((t - t[0]) / SPLIT_BLOCK_S).astype(np.int64)
+    nb = int(block[-1]) + 1
+    if nb < 3:
+        return None
+    n_held = min(max(int(round(fraction * nb)), 1), nb - 1)
+    chosen = np.unique(1 + np.floor((np.arange(n_held) + 0.5) * (nb - 1) / n_held).astype(np.int64))
+    held = np.isin(block, chosen)
+    fit_part = flight._take(np.flatnonzero(~held))
+    held_part = dataclasses.replace(flight._take(np.flatnonzero(held)), flight_id=f"{flight.flight_id}/held-out")
+    return fit_part, held_part
+
+
 def split_fit_holdout(flights, fraction: float = 0.3, seed: int = 0) -> tuple[list, list]:
     """Split flights into fit and held-out flights (seeded, by flight, stratified by unit).
 
-    About ``round(fraction * n)`` flights (at least one, at most ``n - 1``) are held out.
-    Each unit keeps its first flight (in a seeded shuffle) for fitting as long as possible;
-    held-out flights are taken round-robin over the units from their remaining flights, then,
-    if still short, whole single-flight units are held out.
+    Every unit keeps fit data and, where it can, gives held-out data, so that each held-out
+    flight is replayed through its own unit's recalibrated model (a unit with no fit flight would
+    be replayed through the fleet's mean model: its manufacturing dispersion would read as a
+    model discrepancy).
+
+    - Units with two flights or more: about ``round(fraction * n)`` of their ``n`` flights (at
+      least one) are held out, taken round-robin over the units (seeded shuffle) from each unit's
+      flights after its first, which it keeps for fitting.
+    - A unit with one flight: the flight is cut into blocks of :data:`SPLIT_BLOCK_S` and about
+      ``fraction`` of them, spread over the flight, are held out as a flight named
+      ``"<flight_id>/held-out"`` (same unit, original times; :func:`_block_split`). A flight of
+      fewer than three blocks stays whole among the fit flights.
 
     Raises
     ------
     DataFormatError
-        Fewer than two flights.
+        No held-out data can be formed (a single flight too short to cut, or none).
     """
     flights = list(flights)
     n = len(flights)
-    if n < 2:
-        raise DataFormatError(
-            f"Too few flights to hold out: got {n} usable flight(s). The discrepancy workflow fits on some "
-            "flights and measures the gap on others it never saw, so it needs at least 2 flights (better 5 or "
-            "more, 3 minutes or longer, each with transients such as the engine-start test sweep).")
+    too_few = DataFormatError(
+        f"Too few flights to hold out: got {n} usable flight(s). The discrepancy workflow fits on some "
+        "flights and measures the gap on others it never saw, so it needs at least 2 flights of one unit, or "
+        f"flights of at least {3 * SPLIT_BLOCK_S:g} s that it can cut into blocks (better 5 flights or more, 3 "
+        "minutes or longer, each with transients such as the engine-start test sweep).")
+    if n == 0:
+        raise too_few
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 5150]))
-    n_hold = min(max(int(round(fraction * n)), 1), n - 1)
     by_unit: dict = {}
     for idx, f in enumerate(flights):
         by_unit.setdefault(unit_key(f), []).append(idx)
     units = list(by_unit)
     order = [units[j] for j in rng.permutation(len(units))]
     shuffled = {u: [by_unit[u][j] for j in rng.permutation(len(by_unit[u]))] for u in order}
-    spare = [shuffled[u][1:] for u in order]
+    multi = [u for u in order if len(shuffled[u]) > 1]
+    n_multi = sum(len(shuffled[u]) for u in multi)
+    n_hold = min(max(int(round(fraction * n_multi)), 1), n_multi - len(multi)) if multi else 0
+    spare = [shuffled[u][1:] for u in multi]
     held: list[int] = []
     depth = 0
-    while len(held) < n_hold and any(depth < len(s) for s in spare):
-        for s in spare:
-            if depth < len(s) and len(held) < n_hold:
-                held.append(s[depth])
+    while len(held) < n_hold and any(depth < len(sp) for sp in spare):
+        for sp in spare:
+            if depth < len(sp) and len(held) < n_hold:
+                held.append(sp[depth])
         depth += 1
-    for u in order:
-        if len(held) >= n_hold:
-            break
-        if len(shuffled[u]) == 1:
-            held.append(shuffled[u][0])
     held_set = set(held)
-    return [f for i, f in enumerate(flights) if i not in held_set], [f for i, f in enumerate(flights) if i in held_set]
+    cut = {}
+    for u in order:
+        if len(shuffled[u]) == 1:
+            parts = _block_split(flights[shuffled[u][0]], fraction)
+            if parts is not None:
+                cut[shuffled[u][0]] = parts
+    if not held_set and not cut:
+        raise too_few
+    fit, held_out = [], []
+    for i, f in enumerate(flights):
+        if i in cut:
+            fit.append(cut[i][0])
+            held_out.append(cut[i][1])
+        elif i in held_set:
+            held_out.append(f)
+        else:
+            fit.append(f)
+    return fit, held_out
 
 
 # --------------------------------------------------------------------------- candidates
@@ -1154,7 +1206,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     t_start = time.perf_counter()
     say = log if log is not None else (lambda msg: None)
     flights = list(flights)
-    if len(flights) < 2:
+    if not flights:
         split_fit_holdout(flights)  # raises the documented message
     frame_s = rp.estimate_frame(flights)
     start = model_for_data(model if model is not None else LoopModel(), frame_s)
@@ -1385,8 +1437,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         # is what a plausible but different model leaves: nothing further is searched in it.
         if v_input.size >= SCORE_SCALE_FRAMES:
             score_cur = region_map(held, v_cur, levels, cal.curve, noise.tau).score
-            if score_cur < config.unexplained_score and not absorbing_parameters(
-                    res.unit_values, start, z_max=config.absorbed_z):
+            if score_cur < config.unexplained_score and not fleet_wide(absorbing_parameters(
+                    res.unit_values, start, z_max=config.absorbed_z), len(res.unit_values)):
                 say(f"what the set leaves is at the level of a plausible model's mismatch (misfit score "
                     f"{score_cur:.1f} < {config.unexplained_score:g}, no value beyond {config.absorbed_z:g} "
                     f"sigmas): no further effect searched")
@@ -1426,10 +1478,18 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     # different model leaves (thresholds calibrated on the altsim, docs/discrepancy.md).
     # A disagreement can also hide in the parameters: values of the final fit still far outside the
     # manufacturing dispersion (absorbed_z sigmas) are a disagreement that the set does not explain.
-    final_flags = absorbing_parameters(final_fit.unit_values, start, z_max=config.absorbed_z)
+    # Only parameters beyond it in several units count (fleet_wide: one unit's outlier is a flag only).
+    n_fit_units = len(final_fit.unit_values)
+    final_flags = fleet_wide(absorbing_parameters(final_fit.unit_values, start, z_max=config.absorbed_z),
+                             n_fit_units)
     # A fit kept within the dispersion that ends at its limit wants to go beyond it: absorbed too.
     limit_hits = at_limit(final_fit.unit_values, [p for p in cur["params"] if dispersion_sigma(start, p.path)
                                                   and p not in params])
+    if limit_hits:
+        at_lim = absorbing_parameters(final_fit.unit_values, start, z_max=0.0)
+        kept = {(f.unit, f.path) for f in fleet_wide([f for f in at_lim if (f.unit, f.path) in set(limit_hits)],
+                                                     n_fit_units)}
+        limit_hits = [h for h in limit_hits if h in kept]
     if limit_hits and len(members) == 1 and not trades_off(
             members[0], cur["gap"], [c for c in outcomes if c.effect == members[0].effect and not c.bounded
                                      and c.tag == "1" and not c.held],

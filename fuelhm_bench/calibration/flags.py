@@ -101,6 +101,42 @@ def absorbing_parameters(unit_values: dict, nominal_model, *, dispersion: Disper
     return tuple(sorted(flags, key=lambda f: -abs(f.z)))
 
 
+#: Units of a fleet (at most all of them) whose values of one parameter must lie beyond the threshold
+#: for :func:`fleet_wide` to keep that parameter's flags.
+MIN_FLAGGED_UNITS = 2
+
+
+def fleet_wide(flags, n_units: int, min_units: int = MIN_FLAGGED_UNITS) -> tuple[ParameterFlag, ...]:
+    """The flags of the parameters flagged in at least ``min(min_units, n_units)`` units.
+
+    A missing effect acts on every unit of the fleet, so the parameter that absorbs it moves in
+    most units (a flow force narrows every unit's outer slot; a supply droop inflates every unit's
+    load). One unit's value beyond the threshold is that unit's oddity: a manufacturing outlier or
+    an estimate from little data, more likely the more units and parameters are fitted (12 units
+    of one flight: 96 values). Such a flag stays a flag; it is not evidence of a fleet-wide
+    disagreement. With one unit, its flags are kept.
+
+    Parameters
+    ----------
+    flags : sequence of ParameterFlag
+        From :func:`absorbing_parameters`.
+    n_units : int
+        Units of the fit.
+    min_units : int, default=MIN_FLAGGED_UNITS
+        Units needed per parameter.
+
+    Returns
+    -------
+    tuple of ParameterFlag
+        The kept flags, in their order.
+    """
+    need = max(1, min(int(min_units), int(n_units)))
+    units_by_path: dict = {}
+    for f in flags:
+        units_by_path.setdefault(f.path, set()).add(f.unit)
+    return tuple(f for f in flags if len(units_by_path[f.path]) >= need)
+
+
 def within_dispersion(parameters, nominal_model, z: float, *, dispersion: Dispersion = Dispersion()) -> tuple:
     """The fit parameters with their limits narrowed to ``z`` dispersion sigmas around the input model.
 
@@ -152,4 +188,5 @@ def at_limit(unit_values: dict, parameters, *, rel: float = 1e-3) -> tuple:
     return tuple(hits)
 
 
-__all__ = ["ParameterFlag", "Z_MAX", "absorbing_parameters", "at_limit", "dispersion_sigma", "within_dispersion"]
+__all__ = ["MIN_FLAGGED_UNITS", "ParameterFlag", "Z_MAX", "absorbing_parameters", "at_limit", "dispersion_sigma",
+           "fleet_wide", "within_dispersion"]
