@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from fuelhm_bench.calibration.discrepancy import (CandidateOutcome, DiscrepancyConfig, excess_reduction, find_discrepancy,
-                                                heldout_likelihood_gain, heldout_rss_by_flight, is_eligible,
+                                                heldout_gain_robust, heldout_likelihood_gain, heldout_rss_by_flight,
+                                                is_eligible,
                                                 separating_test)
 from fuelhm_bench.calibration.flags import absorbing_parameters, dispersion_sigma, fleet_wide
 from fuelhm_bench.calibration.probe import sparse_probe
@@ -223,6 +224,25 @@ def test_reduction_above_the_noise_floor():
     assert DiscrepancyConfig().reduction_above_floor
     with pytest.raises(ParameterError, match="reduction_above_floor"):
         DiscrepancyConfig(reduction_above_floor=1)
+
+
+def test_no_single_held_out_flight_carries_the_sample_wise_reduction():
+    # 12 held-out flights; the reference failed on one (RSS 5000 instead of about 100): any refit that
+    # repairs it "reduces" the total by 80 %, though it predicts the other 11 flights no better.
+    ref = [100.0] * 11 + [5000.0]
+    refit = [99.0] * 11 + [100.0]
+    n = [5000] * 12
+    plain = heldout_likelihood_gain(sum(refit), sum(ref), sum(n), 10.0)
+    assert plain[0] > 0.8
+    red, gain = heldout_gain_robust(refit, ref, n, 10.0)
+    assert red == pytest.approx(0.01) and gain == pytest.approx(11 * 500 / 2 * math.log(1100 / 1089))
+    # An effect the data have: every flight better, the robust value close to the plain one.
+    effect = [50.0] * 11 + [2400.0]
+    red_e, _ = heldout_gain_robust(effect, ref, n, 10.0)
+    assert 0.5 <= red_e <= heldout_likelihood_gain(sum(effect), sum(ref), sum(n), 10.0)[0]
+    # Fewer than three held-out flights: the plain values.
+    assert heldout_gain_robust(refit[-2:], ref[-2:], n[-2:], 10.0) == heldout_likelihood_gain(
+        sum(refit[-2:]), sum(ref[-2:]), sum(n[-2:]), 10.0)
 
 
 def test_held_out_condition_met_by_the_sample_wise_likelihood():
