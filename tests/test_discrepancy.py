@@ -198,12 +198,18 @@ def test_cli_json_prints_one_object_and_out_writes_the_report(overlap_file, tmp_
     assert {r["effect"] for r in payload["ranking"]} == {"spool_overlap", "lvdt_lag", "torque_motor_hysteresis", "none"}
     assert all({"effect", "bic", "gap_after"} <= set(r) for r in payload["ranking"])
     assert "split:" in captured.err  # logs go to stderr
+    # 2 units x 2 flights x 4 min: short flights and one held-out flight weaken the evidence; the
+    # caveats are in the JSON, the log and the report, and leave the verdict alone.
+    assert [c["code"] for c in payload["caveats"]] == ["short_flights", "few_heldout"]
+    assert "median 4.0 min" in payload["caveats"][0]["message"]
+    assert "caveat (short_flights)" in captured.err and payload["verdict"] == "effect"
     for name in ("report.md", "augmented_model.yaml", "result.json", "curves.png", "residual_map.png", "regions.png"):
         assert (out / name).stat().st_size > 0
     model = load_model(out / "augmented_model.yaml")
     assert model.effect("spool_overlap").overlap_m == pytest.approx(payload["parameters"]["overlap_m"]["value"])
     report = (out / "report.md").read_text()
     assert "Missing effect: `spool_overlap`" in report and "![curves](curves.png)" in report
+    assert "**Caveats" in report and "- `few_heldout`: 1 held-out flight(s)" in report
     # The augmented model simulates.
     sim = tmp_path / "sim.parquet"
     assert main(["simulate", "--model", str(out / "augmented_model.yaml"), "--units", "1", "--flights", "1",

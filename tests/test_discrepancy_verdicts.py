@@ -14,6 +14,7 @@ import math
 import numpy as np
 import pytest
 
+from fuelhm_bench.calibration.caveats import data_caveats
 from fuelhm_bench.calibration.discrepancy import (CandidateOutcome, DiscrepancyConfig, excess_reduction, find_discrepancy,
                                                 heldout_gain_robust, heldout_likelihood_gain, heldout_rss_by_flight,
                                                 is_eligible,
@@ -116,6 +117,8 @@ def test_verdict_none_on_healthy_altsim_data():
     assert r.verdict == "none", (r.unexplained, [(c.label, round(c.delta_bic), round(c.gap_reduction, 2))
                                                  for c in r.ranking])
     assert r.effect == "none" and r.effect_set == () and r.probe is None
+    # 2 units x 2 flights x 4 min, one held-out flight: both caveats, the verdict untouched.
+    assert [c.code for c in r.caveats] == ["short_flights", "few_heldout"]
     # Candidates that explain nothing are stopped early (fewer replays), reported as such, never eligible.
     stopped = [c for c in r.ranking if c.stopped_early]
     assert stopped and all(not c.eligible and c.delta_bic <= SMALL.bic_threshold for c in stopped)
@@ -426,3 +429,21 @@ def test_a_free_fit_with_implausible_values_gives_way_to_the_eligible_plausible_
     # No eligible plausible fit of the same effect: the free fit stands (the verdict then flags its values).
     other = oc(True, 50.0, near, effect="rod_friction")
     assert best_explanation([free, other], nominal, 5.0) is free
+
+
+def test_caveats_name_the_data_that_weaken_a_verdict():
+    # The study's size (3 units x 4 flights x 20 min, 4 held-out flights): nothing to say.
+    assert data_caveats([1200.0] * 12, n_units=3, n_heldout_flights=4) == ()
+    # Each condition alone, at its boundary.
+    short = data_caveats([299.0, 299.0, 1200.0], n_units=3, n_heldout_flights=3)
+    assert [c.code for c in short] == ["short_flights"] and "median 5.0 min" in short[0].message
+    assert data_caveats([300.0, 300.0, 60.0], n_units=3, n_heldout_flights=3) == ()  # the median decides
+    few = data_caveats([1200.0] * 6, n_units=2, n_heldout_flights=2)
+    assert [c.code for c in few] == ["few_heldout"] and few[0].message.startswith("2 held-out flight(s)")
+    assert [c.code for c in data_caveats([1200.0] * 4, n_units=1, n_heldout_flights=3)] == ["one_unit"]
+    # All three, in a fixed order, each saying what data would remove the doubt; JSON-ready.
+    every = data_caveats([180.0, 180.0], n_units=1, n_heldout_flights=1)
+    assert [c.code for c in every] == ["short_flights", "few_heldout", "one_unit"]
+    assert all("remove" in c.message for c in every)
+    assert every[0].as_json() == {"code": "short_flights", "message": every[0].message}
+    assert "6.5-7.7 kN/m" in every[0].message  # the measurement behind it (docs/discrepancy.md, ninth round)

@@ -10,7 +10,7 @@
 Modules: ``velocity`` (differentiator, local means), ``replay`` (measured flights through
 the model), ``curve`` (velocity-gain curve and gap metric), ``fit`` (bounded joint least
 squares), ``recalibrate``, ``candidates`` (effect library search space), ``regions``
-(residual maps), ``discrepancy``, ``report`` (figures, Markdown), ``synthetic`` (data with a
+(residual maps), ``discrepancy``, ``caveats`` (what weakens a verdict's evidence), ``report`` (figures, Markdown), ``synthetic`` (data with a
 hidden effect), ``study`` (statistical evaluation). See ``docs/calibration.md`` and
 ``docs/discrepancy.md``.
 """

@@ -48,6 +48,7 @@ import numpy as np
 
 from fuelhm_bench.calibration import replay as rp
 from fuelhm_bench.calibration.candidates import EffectCandidate, get_candidates
+from fuelhm_bench.calibration.caveats import data_caveats
 from fuelhm_bench.calibration.curve import CurveConfig, gap, gap_metric_text, gap_noise_floor
 from fuelhm_bench.calibration.fit import JointFit, apply_values, fit_joint
 from fuelhm_bench.calibration.flags import (ParameterFlag, absorbing_parameters, at_limit, dispersion_sigma,
@@ -59,6 +60,7 @@ from fuelhm_bench.calibration.recalibrate import (
     CalibrationConfig,
     check_excitation,
     fleet_values,
+    group_by_unit,
     merge_sets,
     model_for_data,
     prepare_units,
@@ -567,6 +569,9 @@ class DiscrepancyResult:
         Where the remaining disagreement is and what it looks like (verdict ``unexplained``).
     probe : ProbeResult or None
         Sparse probe of the remaining residuals (verdict ``unexplained``).
+    caveats : tuple of Caveat
+        Properties of the data that weaken the verdict's evidence
+        (:func:`~fuelhm_bench.calibration.caveats.data_caveats`); they never change it.
     """
 
     effect: str
@@ -598,6 +603,7 @@ class DiscrepancyResult:
     flags: tuple = ()
     unexplained: str | None = None
     probe: ProbeResult | None = None
+    caveats: tuple = ()
 
     @property
     def gap_reduction(self) -> float:
@@ -615,6 +621,7 @@ class DiscrepancyResult:
             "flags": [f.as_json() for f in self.flags],
             "unexplained": self.unexplained,
             "probe": None if self.probe is None else self.probe.as_json(),
+            "caveats": [c.as_json() for c in self.caveats],
             "region": self.region,
             "region_levels": [{"factor": lv.factor, "level": lv.level, "samples": lv.count, "score": lv.score,
                                "local_gap": lv.local_gap_mm_s}
@@ -1098,8 +1105,9 @@ def heldout_gain_robust(rss_by_flight, ref_by_flight, n_by_flight, tau: float) -
 
     With three held-out flights or more, the reduction and gain are also computed with each flight
     left out, and the case with the smallest reduction is returned: an effect the data have improves
-    the prediction of every flight, while a reference that failed on one unit (a recalibration stuck
-    in a local minimum: 12 healthy altsim units x 1 flight, one unit's values at -9 to -11 sigma) lets
+    the prediction of every flight, while a reference that failed on one unit (a recalibration moved
+    to a distant minimum by its restart: 12 healthy altsim units x 1 flight, one unit's values at -9 to
+    -11 sigma) lets
     *any* refit "reduce" the held-out RSS by 40-53 % through that one flight alone (0-4 % without it).
     With fewer flights, the plain values.
     """
@@ -1245,6 +1253,10 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 
     fit_flights, held_flights = split_fit_holdout(flights, config.holdout_fraction, config.seed)
     say(f"split: {len(fit_flights)} fit flight(s), {len(held_flights)} held-out flight(s)")
+    caveats = data_caveats([float(f.time_s[-1] - f.time_s[0]) + frame_s for f in flights],
+                           len(group_by_unit(flights)), len(held_flights))
+    for c in caveats:
+        say(f"caveat ({c.code}): {c.message}")
     fit_sets = prepare_units(fit_flights, start, cal, frame_s=frame_s, max_frames=cal.fit_max_frames,
                              seed=config.seed)
     check_excitation(fit_sets, "the fit flights")
@@ -1575,7 +1587,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         fit_flights=tuple(f.flight_id for f in fit_flights), heldout_flights=tuple(f.flight_id for f in held_flights),
         decision_rule=config.decision_rule, frame_s=frame_s, n2_measured=held.n2_measured,
         seconds=time.perf_counter() - t_start, curve=cal.curve, verdict=verdict, effect_set=tuple(members),
-        equivalents=tuple(equivalents), flags=flags, unexplained=unexplained, probe=probe)
+        equivalents=tuple(equivalents), flags=flags, unexplained=unexplained, probe=probe, caveats=caveats)
 
 
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "EarlyStop", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",

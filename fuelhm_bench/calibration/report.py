@@ -216,6 +216,10 @@ def _discrepancy_markdown(result, model_file: str, data_name: str) -> str:
         lines += [f"**Equivalent explanation:** `{e.alternative}` explains the data about as well as `{e.selected}` "
                   f"(held-out reduction {100 * e.reduction_alternative:.0f} % vs {100 * e.reduction_selected:.0f} %, "
                   f"dBIC {e.delta_bic:.0f}). Separating test: {e.test}.", ""]
+    if r.caveats:
+        lines += ["**Caveats (properties of the data that weaken this verdict; they do not change it):**", ""]
+        lines += [f"- `{c.code}`: {c.message}" for c in r.caveats]
+        lines.append("")
     if r.flags:
         lines += ["**Recalibrated values outside the manufacturing dispersion (likely absorbing a missing effect):**",
                   "", "| unit | parameter | value | nominal | z [sigma] |", "|---|---|---|---|---|"]

@@ -109,6 +109,8 @@ def _run(args: argparse.Namespace, config, out_dir) -> int:
             print(f"equivalent: {e.alternative} (test: {e.test})")
         for f in result.flags:
             print(f"flag: unit {f.unit} {f.path} = {f.value:.5g} ({f.z:+.1f} sigma): likely absorbing a missing effect")
+        for c in result.caveats:
+            print(f"caveat ({c.code}): {c.message}")
         if result.probe is not None:
             print("probe: " + ", ".join(f"{t} ({c:+.3g})" for t, c in zip(result.probe.terms, result.probe.coefficients))
                   + f"; closes {100 * result.probe.gap_closed:.0f} % of the held-out gap")
