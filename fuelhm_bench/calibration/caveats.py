@@ -80,11 +80,11 @@ def data_caveats(flight_durations_s: Sequence[float], n_units: int, n_heldout_fl
         median_s = float(np.median(durations))
         if median_s < SHORT_FLIGHT_S:
             out.append(Caveat("short_flights", (
-                f"short flights (median {median_s / 60:.1f} min, under {SHORT_FLIGHT_S / 60:g} min): the engine "
-                "start and its test sweep weigh heavily in each flight, and a model's structural mismatch there can "
-                "look like an effect (healthy data of the second simulator, 3-min flights: a load stiffness of "
-                "6.5-7.7 kN/m named or kept in 7 of 10 data sets; 4-6 min flights: none of 12). Longer flights "
-                "remove this doubt.")))
+                f"short flights (median {median_s / 60:.1f} min, under {SHORT_FLIGHT_S / 60:g} min) cover few "
+                "operating conditions, so a model's structural mismatch in one of them can look like an effect "
+                "(healthy data of the second simulator, whose 60-s engine start with its test sweep is a third of a "
+                "3-min flight: a load stiffness of 6.5-7.7 kN/m named or kept in 7 of 10 data sets with 3-min "
+                "flights, none of 12 with 4-6 min flights). Longer flights remove this doubt.")))
     if n_heldout_flights < MIN_HELDOUT_FLIGHTS:
         out.append(Caveat("few_heldout", (
             f"{n_heldout_flights} held-out flight(s): the check that no single held-out flight carries the "
