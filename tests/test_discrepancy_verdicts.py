@@ -17,7 +17,7 @@ import pytest
 from fuelhm_bench.calibration.caveats import data_caveats
 from fuelhm_bench.calibration.discrepancy import (CandidateOutcome, DiscrepancyConfig, excess_reduction, find_discrepancy,
                                                 heldout_gain_robust, heldout_likelihood_gain, heldout_rss_by_flight,
-                                                is_eligible,
+                                                is_eligible, verdict_of,
                                                 separating_test)
 from fuelhm_bench.calibration.flags import absorbing_parameters, dispersion_sigma, fleet_wide
 from fuelhm_bench.calibration.probe import sparse_probe
@@ -447,3 +447,19 @@ def test_caveats_name_the_data_that_weaken_a_verdict():
     assert all("remove" in c.message for c in every)
     assert every[0].as_json() == {"code": "short_flights", "message": every[0].message}
     assert "6.5-7.7 kN/m" in every[0].message  # the measurement behind it (docs/discrepancy.md, ninth round)
+
+
+def test_verdict_thresholds_leave_one_units_structural_mismatch_at_none():
+    cfg = DiscrepancyConfig()
+    assert cfg.unexplained_score == 40.0 and "misfit score >= 40" in cfg.decision_rule
+    # Healthy altsim, one unit x 12 flights x 20 min (seed 82): held-out gap 0.474 mm/s, floor 0.187,
+    # misfit score 31.8, no value beyond 5 sigma -- structural mismatch, not a missing effect.
+    assert verdict_of(0.474, 0.187, 31.8, False, False, cfg) == "none"
+    assert verdict_of(0.474, 0.187, 31.8, False, False, dataclasses.replace(cfg, unexplained_score=30.0)) \
+        == "unexplained"  # the former threshold
+    # The independent supply droop (score 45) stays unexplained; both conditions are needed.
+    assert verdict_of(0.634, 0.187, 45.9, False, False, cfg) == "unexplained"
+    assert verdict_of(0.30, 0.187, 45.9, False, False, cfg) == "none"  # gap under 2 x its floor
+    # Values that absorb an effect make it unexplained whatever the gap; a set that leaves little is named.
+    assert verdict_of(0.2, 0.187, 5.0, True, True, cfg) == "unexplained"
+    assert verdict_of(0.2, 0.187, 5.0, False, True, cfg) == "effect"
