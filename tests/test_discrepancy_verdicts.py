@@ -304,7 +304,7 @@ def test_forward_selection_stops_at_a_remainder_of_structural_size_once_the_scor
     # The two-effect data above: on 2 x 2 flights of 4 min the misfit score is far below its calibrated
     # scale, so the search for a second member runs (the test above). Declaring these held-out frames
     # enough for the score's scale makes the gate apply: after the lag the remainder's score is under
-    # unexplained_score with no value beyond absorbed_z, so nothing further is searched.
+    # continue_score with no value beyond absorbed_z, so nothing further is searched.
     import fuelhm_bench.calibration.discrepancy as d
 
     _, flights = _flights(AltEffects(lvdt_lag_s=0.05, hysteresis_a=3e-4), seed=41)
@@ -452,6 +452,12 @@ def test_caveats_name_the_data_that_weaken_a_verdict():
 def test_verdict_thresholds_leave_one_units_structural_mismatch_at_none():
     cfg = DiscrepancyConfig()
     assert cfg.unexplained_score == 40.0 and "misfit score >= 40" in cfg.decision_rule
+    # The forward selection still searches a further member from 30: a search is guarded by the
+    # member's own evidence, the verdict is a claim.
+    assert cfg.continue_score == 30.0
+    for bad in (0.0, -1.0, float("inf"), "30"):
+        with pytest.raises(ParameterError, match="continue_score"):
+            DiscrepancyConfig(continue_score=bad)
     # Healthy altsim, one unit x 12 flights x 20 min (seed 82): held-out gap 0.474 mm/s, floor 0.187,
     # misfit score 31.8, no value beyond 5 sigma -- structural mismatch, not a missing effect.
     assert verdict_of(0.474, 0.187, 31.8, False, False, cfg) == "none"
