@@ -21,7 +21,8 @@ def register(sub) -> None:
                     "separates them), 'none' (what remains is at the level of healthy data from a plausible model) "
                     "or 'unexplained' (a significant gap no candidate explains: where it is, and the terms a "
                     "sparse regression of the residuals finds); recalibrated parameters beyond the manufacturing "
-                    "dispersion are flagged. --out DIR writes a Markdown report with figures and the augmented "
+                    "dispersion are flagged, and caveats name what in the data weakens the verdict (flights "
+                    "under 5 min, fewer than 3 held-out flights, one unit). --out DIR writes a Markdown report with figures and the augmented "
                     "model (YAML, loadable by 'simulate --model'); --json prints one JSON object on stdout.")
     p.add_argument("flights", help="measured healthy flights (.parquet, .csv, .csv.gz; format: docs/data-format.md)")
     p.add_argument("--model", metavar="YAML", help="model to examine (default: nominal)")
