@@ -48,7 +48,7 @@ import numpy as np
 
 from fuelhm_bench.calibration import replay as rp
 from fuelhm_bench.calibration.candidates import EffectCandidate, get_candidates
-from fuelhm_bench.calibration.caveats import data_caveats
+from fuelhm_bench.calibration.caveats import MIN_HELDOUT_FLIGHTS, data_caveats
 from fuelhm_bench.calibration.curve import CurveConfig, gap, gap_metric_text, gap_noise_floor
 from fuelhm_bench.calibration.fit import JointFit, apply_values, fit_joint
 from fuelhm_bench.calibration.flags import (ParameterFlag, absorbing_parameters, at_limit, dispersion_sigma,
@@ -263,7 +263,8 @@ class DiscrepancyConfig:
                 + ("" if self.min_heldout_rss_reduction is None else
                    f"or its sample-wise held-out residual sum of squares by at least "
                    f"{100 * self.min_heldout_rss_reduction:g} % with a held-out log-likelihood gain above "
-                   f"{self.bic_threshold:g} (both also with any one of 3 or more held-out flights left out) ")
+                   f"{self.bic_threshold:g} (both also with any one of {MIN_HELDOUT_FLIGHTS} or more held-out flights "
+                   f"left out) ")
                 + f"relative to recalibration alone (fitted the same way: "
                 f"free, or -- when the free recalibration absorbs -- within {self.absorbed_z:g} dispersion sigmas, "
                 f"and then also beats the free recalibration on the same held-out measure); add further effects "
@@ -1110,7 +1111,7 @@ def heldout_likelihood_gain(rss: float, rss_ref: float, n: int, tau: float) -> t
 def heldout_gain_robust(rss_by_flight, ref_by_flight, n_by_flight, tau: float) -> tuple[float, float]:
     """:func:`heldout_likelihood_gain` that no single held-out flight can carry.
 
-    With three held-out flights or more, the reduction and gain are also computed with each flight
+    With ``MIN_HELDOUT_FLIGHTS`` (3) held-out flights or more, the reduction and gain are also computed with each flight
     left out, and the case with the smallest reduction is returned: an effect the data have improves
     the prediction of every flight, while a reference that failed on one unit (a recalibration moved
     to a distant minimum by its restart: 12 healthy altsim units x 1 flight, one unit's values at -9 to
@@ -1122,7 +1123,7 @@ def heldout_gain_robust(rss_by_flight, ref_by_flight, n_by_flight, tau: float) -
     r = np.asarray(ref_by_flight, dtype=float)
     m = np.asarray(n_by_flight, dtype=float)
     best = heldout_likelihood_gain(float(a.sum()), float(r.sum()), int(m.sum()), tau)
-    if a.size < 3 or math.isnan(best[0]):
+    if a.size < MIN_HELDOUT_FLIGHTS or math.isnan(best[0]):
         return best
     for i in range(a.size):
         keep = np.arange(a.size) != i
