@@ -21,7 +21,7 @@ from fuelhm_baselines._common import (ModeSubset, collinearity_guilt_7, cross_fi
                                       indicator_values, reference_signatures, row_values, sklearn_seed,
                                       standardisation)
 
-__all__ = ["IsolationForestMethod"]
+__all__ = ["FlatForest", "IsolationForestMethod"]
 
 
 class IsolationForestMethod(BaseMethod):
@@ -37,7 +37,12 @@ class IsolationForestMethod(BaseMethod):
 
     **Score.** ``-IsolationForest.score_samples(z)``: the anomaly score of
     Liu et al. (2008), in (0, 1], higher = easier to isolate = more abnormal
-    (about 0.5 or less for typical healthy flights).
+    (about 0.5 or less for typical healthy flights). ``decide`` scores its one
+    flight with :class:`FlatForest`, the fitted trees walked as flat arrays,
+    which gives the same bits as ``score_samples`` (checked at the end of
+    ``fit`` on the training flights; ``score_samples`` is used where it does
+    not) at a fraction of its cost: ``score_samples`` on a single row spends
+    about 4.5 ms dispatching its 100 trees one by one through joblib.
 
     **Threshold.** ``threshold_`` is the ``quantile`` quantile of the
     out-of-fold scores of the healthy training flights (``training_scores_``):
@@ -93,6 +98,9 @@ class IsolationForestMethod(BaseMethod):
         ``diagnosis="uniform"`` or without published signatures).
     n_training_flights_ : int
         Number of healthy training flights.
+    flat_forest_ : FlatForest or None
+        ``forest_`` as flat arrays (None where it does not reproduce
+        ``forest_.score_samples`` on the training flights bit for bit).
 
     Examples
     --------
@@ -149,6 +157,7 @@ class IsolationForestMethod(BaseMethod):
 
         self.healthy_model_ = model
         self.forest_ = forest
+        self.flat_forest_ = FlatForest.if_exact(forest, _features(model, x))
         self.training_scores_ = scores
         self.threshold_ = float(np.quantile(scores, self.quantile))
         self.references_ = (reference_signatures(knowledge, "signatures", model.std_)
@@ -157,7 +166,9 @@ class IsolationForestMethod(BaseMethod):
 
     def _decide(self, row: pd.Series) -> Decision:
         x = row_values(row)
-        score = float(-self.forest_.score_samples(_features(self.healthy_model_, x))[0])
+        z = _features(self.healthy_model_, x)
+        flat = getattr(self, "flat_forest_", None)
+        score = float(flat.score(z[0]) if flat is not None else -self.forest_.score_samples(z)[0])
         if score <= self.threshold_:
             return Decision.no_alarm(score)
         # references_ is None for diagnosis="uniform": collinearity_guilt_7 is then uniform.
@@ -171,3 +182,75 @@ def _features(model: HealthyModel, x: np.ndarray) -> np.ndarray:
     """Z-scores with missing values imputed by the healthy mean (Z = 0)."""
     z = model.zscores(x)
     return np.where(np.isfinite(z), z, 0.0)
+
+
+def _mean_path_length(n_samples: np.ndarray) -> np.ndarray:
+    """``c(n)``: mean path length of an unsuccessful search in a binary search tree of ``n`` points.
+
+    Liu, Ting & Zhou (2008), eq. 1: ``c(n) = 2 H(n - 1) - 2 (n - 1) / n`` with
+    ``H(i) = ln(i) + 0.5772156649`` (Euler's constant); ``c(1) = 0``, ``c(2) = 1``.
+    The operations are those of scikit-learn's forest, so the scores agree to the bit.
+    """
+    n = np.asarray(n_samples, dtype=float)
+    out = np.zeros(n.shape)
+    out[n == 2] = 1.0
+    big = n > 2
+    out[big] = 2.0 * (np.log(n[big] - 1.0) + np.euler_gamma) - 2.0 * (n[big] - 1.0) / n[big]
+    return out
+
+
+class FlatForest:
+    """A fitted :class:`~sklearn.ensemble.IsolationForest` as flat node arrays, to score one row fast.
+
+    Every tree's nodes are concatenated; a row walks all the trees at once, one
+    level per step (as many steps as the deepest tree). A leaf contributes its
+    depth plus ``c(n)`` of the training points left in it, summed over the
+    trees in their order, and the score is ``2 ** (-mean / c(max_samples))``,
+    the opposite of ``IsolationForest.score_samples``. The row is rounded to
+    float32 first, as the trees compare it.
+
+    Parameters
+    ----------
+    forest : sklearn.ensemble.IsolationForest
+        A fitted forest (its trees' public ``tree_`` arrays are read).
+    """
+
+    def __init__(self, forest: IsolationForest) -> None:
+        left, right, feature, threshold, term, roots = [], [], [], [], [], []
+        offset, depth = 0, 0
+        for tree, columns in zip(forest.estimators_, forest.estimators_features_):
+            t = tree.tree_
+            leaf = t.children_left < 0
+            roots.append(offset)
+            left.append(np.where(leaf, np.arange(t.node_count), t.children_left) + offset)
+            right.append(np.where(leaf, np.arange(t.node_count), t.children_right) + offset)
+            columns = np.asarray(columns)
+            feature.append(np.where(leaf, 0, columns[np.maximum(t.feature, 0)]))
+            threshold.append(np.where(leaf, np.inf, t.threshold))
+            depths = t.compute_node_depths()
+            term.append(depths + _mean_path_length(t.n_node_samples) - 1.0)
+            offset += t.node_count
+            depth = max(depth, int(depths.max()))
+        self.left, self.right = np.concatenate(left), np.concatenate(right)
+        self.feature, self.threshold = np.concatenate(feature), np.concatenate(threshold)
+        self.term, self.roots = np.concatenate(term), np.asarray(roots)
+        self.steps = depth - 1
+        self.denominator = float(len(forest.estimators_) * _mean_path_length(np.array([forest.max_samples_]))[0])
+
+    @classmethod
+    def if_exact(cls, forest: IsolationForest, x: np.ndarray) -> FlatForest | None:
+        """The flat forest when it scores ``x`` exactly as ``forest.score_samples`` does, else None."""
+        flat = cls(forest)
+        mine = np.array([flat.score(row) for row in x])
+        return flat if np.array_equal(mine, -forest.score_samples(x)) else None
+
+    def score(self, row: np.ndarray) -> float:
+        """Anomaly score of one row of features (``-score_samples``, in (0, 1])."""
+        x = np.asarray(row, dtype=np.float32).astype(float)
+        node = self.roots
+        for _ in range(self.steps):  # a leaf points to itself, and its threshold is +inf
+            node = np.where(x[self.feature[node]] <= self.threshold[node], self.left[node], self.right[node])
+        depth = np.cumsum(self.term[node])[-1]  # summed tree by tree, in order, like the forest
+        # one training point per tree: c(1) = 0, and the forest takes the ratio as 1 (score 0.5)
+        ratio = depth / self.denominator if self.denominator != 0.0 else 1.0
+        return float(np.power(2.0, -ratio))

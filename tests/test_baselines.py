@@ -416,6 +416,46 @@ def test_isolation_forest_false_alarm_rate_and_detection(world, fitted, fresh_de
     assert table["diagnosed"].mean() >= 0.9, table
 
 
+@pytest.mark.parametrize("kw", [{}, {"max_samples": 0.5}, {"max_samples": 1}, {"max_samples": 2},
+                                {"max_features": 0.5}, {"n_estimators": 7}],
+                         ids=["default", "half", "one-sample", "two-samples", "feature-subsets", "seven-trees"])
+def test_flat_forest_scores_every_row_as_score_samples_does(kw):
+    """The flat forest is the forest: same bits as -score_samples on fresh rows, far outside
+    the training cloud too, and on rows of float32 ties (a row equal to a threshold)."""
+    from sklearn.ensemble import IsolationForest
+
+    from fuelhm_baselines.isolation_forest import FlatForest
+
+    rng = np.random.default_rng(7)
+    x = rng.normal(size=(150, 6))
+    forest = IsolationForest(random_state=3, **kw).fit(x)
+    flat = FlatForest(forest)
+    t = forest.estimators_[0].tree_
+    node = int(np.flatnonzero(t.children_left >= 0)[0]) if (t.children_left >= 0).any() else None
+    rows = np.vstack([x[:20], 5.0 * rng.normal(size=(60, 6)), np.full((1, 6), 1e6)])
+    if node is not None:  # a row lying on a split threshold (the comparison is <=, in float32)
+        tie = x[0].copy()
+        tie[forest.estimators_features_[0][t.feature[node]]] = t.threshold[node]
+        rows = np.vstack([rows, tie])
+    mine = np.array([flat.score(r) for r in rows])
+    np.testing.assert_array_equal(mine, -forest.score_samples(rows))
+    assert FlatForest.if_exact(forest, x) is not None
+
+
+def test_isolation_forest_decides_with_the_flat_forest(world):
+    """decide uses the flat forest, and its scores are the forest's."""
+    method = IsolationForestMethod(n_estimators=30, cv=2).fit(world["train"], knowledge=world["knowledge"],
+                                                              random_state=0)
+    assert method.flat_forest_ is not None
+    rows = world["strong"].iloc[::25]
+    d = method.decide_table(rows)
+    from fuelhm_baselines._common import indicator_values
+    from fuelhm_baselines.isolation_forest import _features
+
+    expected = -method.forest_.score_samples(_features(method.healthy_model_, indicator_values(rows)))
+    np.testing.assert_array_equal(d["score"].to_numpy(), expected)
+
+
 def test_isolation_forest_uniform_diagnosis(world):
     method = IsolationForestMethod(n_estimators=30, diagnosis="uniform").fit(
         world["train"], knowledge=world["knowledge"], random_state=0)
