@@ -69,8 +69,10 @@ def plot_score_distributions(run: Run, config: ScoringConfig | None = None, *, b
     colors = [f"C{i}" for i in range(10)]
     for i, (name, s) in enumerate(groups):
         color = colors[i % len(colors)]
-        ax.hist(s, bins=edges, density=True, alpha=0.35 if i == 0 else 0.25, color=color,
-                label=f"{name} (n={s.size})")
+        # one filled outline per group (hist draws a patch per bin: ~10x the drawing time)
+        density, _ = np.histogram(s, bins=edges, density=True)
+        ax.stairs(density, edges, fill=True, alpha=0.35 if i == 0 else 0.25, color=color,
+                  label=f"{name} (n={s.size})")
         sd = s.std(ddof=0)
         if s.size >= 2 and sd > 0:
             ax.plot(grid, norm.pdf(grid, s.mean(), sd), color=color, lw=1.5)
@@ -80,7 +82,7 @@ def plot_score_distributions(run: Run, config: ScoringConfig | None = None, *, b
         ax.text(thr, ymax * 0.95, f" A={a:g}", rotation=90, va="top", ha="left", fontsize=7)
     ax.set_xlabel("global score (method units)")
     ax.set_ylabel("density")
-    ax.set_title(f"{run.name}: global-score distributions, Thr = mu + A sigma "
+    ax.set_title(f"{run.name}\nglobal-score distributions, Thr = mu + A sigma "
                  f"(mu={model.mu:.3g}, sigma={model.sigma:.3g})", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
