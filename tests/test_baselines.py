@@ -237,8 +237,8 @@ def fitted(world):
             for k, m in methods.items()}
 
 
-#: Fresh healthy flights decided by each method (the isolation forest is ~10x slower per
-#: flight than the others, so it gets the first 1000 of them).
+#: Fresh healthy flights decided by each method (the isolation forest gets the first 1000: its
+#: false-alarm tolerance below is computed for that many).
 N_FRESH = {"paper": 3000, "iforest": 1000, "itl": 3000}
 
 
