@@ -116,6 +116,29 @@ def test_dask_loopback_cluster_runs_the_board(small_board, tmp_path):
         assert store.keys() == {t.key for t in plan_tasks(small_board)}
 
 
+def _start_environment() -> bytes:
+    """The environment this process started with (what glibc read), from /proc."""
+    with open("/proc/self/environ", "rb") as f:
+        return f.read()
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/environ"), reason="Linux /proc only")
+def test_local_cluster_workers_start_with_one_malloc_arena():
+    """--jobs N: the workers start with MALLOC_ARENA_MAX=1 (set before the spawn, so glibc reads it),
+    which keeps a build on the worker's task thread on the main heap (docs/methods.md)."""
+    from fuelhm_bench.benchmark.distributed import WORKER_ENVIRONMENT, _client
+
+    client, cluster = _client(1, None)
+    try:
+        started = list(client.run(_start_environment).values())
+    finally:
+        client.close()
+        cluster.close()
+    assert len(started) == 1
+    for key, value in WORKER_ENVIRONMENT.items():
+        assert f"{key}={value}".encode() in started[0].split(b"\0")
+
+
 def test_raw_signal_method_gets_a_leaderboard_row(small_board, tmp_path):
     """The raw-signal baseline from the config file to a stored, scored row (physics: it gets its flights)."""
     rows = run_board(_with_raw(small_board), tmp_path / "physics", flight_minutes=FLIGHT_MINUTES, log=lambda s: None)
