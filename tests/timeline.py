@@ -6,7 +6,9 @@ A developer's tool for issue 10 (where a command's wall time goes: idle cores, s
 
 Each line: ``<wall s> cpu <tree CPU s> cores <CPU used per wall second since the last line>``; the
 command's stderr lines come time-stamped (``<wall s> ERR ...``; ``paper`` prints its stages there
-when stderr is not a terminal); the last line gives the wall time and the CPU of the finished tree.
+when stderr is not a terminal). At the end, the CPU of each process of the tree as last seen
+(``proc <first seen s> <CPU s> <pid> <command>``, those above 0.5 s; a process ending between two
+polls loses its last half-second), then the wall time and the CPU of the finished tree.
 Linux only (reads ``/proc``).
 """
 
@@ -17,6 +19,35 @@ import subprocess
 import sys
 import threading
 import time
+
+
+def tree_processes(root: int) -> dict[int, tuple[float, str]]:
+    """``{pid: (CPU s of the process itself, command line)}`` of ``root``'s descendants alive now."""
+    children: dict[int, list[int]] = {}
+    stats: dict[int, list[str]] = {}
+    for p in os.listdir("/proc"):
+        if not p.isdigit():
+            continue
+        try:
+            with open(f"/proc/{p}/stat") as f:
+                stats[int(p)] = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(stats[int(p)][1]), []).append(int(p))
+    tick = os.sysconf("SC_CLK_TCK")
+    out, stack = {}, [root]
+    while stack:
+        for pid in children.get(stack.pop(), []):
+            if pid in out:
+                continue
+            stack.append(pid)
+            try:
+                with open(f"/proc/{pid}/cmdline", "rb") as f:
+                    cmd = f.read().replace(b"\0", b" ").decode(errors="replace").strip()
+            except OSError:
+                cmd = "?"
+            out[pid] = ((int(stats[pid][11]) + int(stats[pid][12])) / tick, cmd)
+    return out
 
 
 def tree_cpu(root: int) -> float:
@@ -52,11 +83,20 @@ def main(argv: list[str]) -> int:
 
     threading.Thread(target=echo, daemon=True).start()
     last_cpu = last_t = 0.0
+    seen: dict[int, tuple[float, float, str]] = {}  # pid: (first seen, CPU, command)
     while proc.poll() is None:
         time.sleep(0.5)
         cpu, now = tree_cpu(os.getpid()), time.time() - t0
+        for pid, (pcpu, cmd) in tree_processes(os.getpid()).items():
+            first, _, known = seen.get(pid, (now, 0.0, ""))
+            seen[pid] = (first, pcpu, cmd or known)  # a process ending has no command line left
         print(f"{now:7.2f} cpu {cpu:7.2f} cores {(cpu - last_cpu) / (now - last_t):4.2f}", flush=True)
         last_cpu, last_t = cpu, now
+    small = [v for v in seen.values() if v[1] <= 0.5]
+    for pid, (first, pcpu, cmd) in sorted(seen.items(), key=lambda kv: kv[1][0]):
+        if pcpu > 0.5:
+            print(f"proc {first:7.2f} {pcpu:7.2f} {pid} {cmd[:120]}")
+    print(f"proc {len(small)} more processes, {sum(v[1] for v in small):.2f} s CPU in all")
     r = os.times()
     print(f"wall {time.time() - t0:.2f} children user {r.children_user:.2f} sys {r.children_system:.2f}")
     return proc.returncode
