@@ -42,7 +42,7 @@ class IsolationForestMethod(BaseMethod):
     which gives the same bits as ``score_samples`` (checked at the end of
     ``fit`` on the training flights; ``score_samples`` is used where it does
     not) at a fraction of its cost: ``score_samples`` on a single row spends
-    about 4.5 ms dispatching its 100 trees one by one through joblib.
+    1-4.5 ms dispatching its 100 trees one by one through joblib.
 
     **Threshold.** ``threshold_`` is the ``quantile`` quantile of the
     out-of-fold scores of the healthy training flights (``training_scores_``):

@@ -21,37 +21,8 @@ import threading
 import time
 
 
-def tree_processes(root: int) -> dict[int, tuple[float, str]]:
-    """``{pid: (CPU s of the process itself, command line)}`` of ``root``'s descendants alive now."""
-    children: dict[int, list[int]] = {}
-    stats: dict[int, list[str]] = {}
-    for p in os.listdir("/proc"):
-        if not p.isdigit():
-            continue
-        try:
-            with open(f"/proc/{p}/stat") as f:
-                stats[int(p)] = f.read().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        children.setdefault(int(stats[int(p)][1]), []).append(int(p))
-    tick = os.sysconf("SC_CLK_TCK")
-    out, stack = {}, [root]
-    while stack:
-        for pid in children.get(stack.pop(), []):
-            if pid in out:
-                continue
-            stack.append(pid)
-            try:
-                with open(f"/proc/{pid}/cmdline", "rb") as f:
-                    cmd = f.read().replace(b"\0", b" ").decode(errors="replace").strip()
-            except OSError:
-                cmd = "?"
-            out[pid] = ((int(stats[pid][11]) + int(stats[pid][12])) / tick, cmd)
-    return out
-
-
-def tree_cpu(root: int) -> float:
-    """CPU seconds (user + sys, and those of reaped children) of ``root``'s descendants alive now."""
+def descendants(root: int) -> dict[int, list[str]]:
+    """``{pid: fields of /proc/<pid>/stat after the command name}`` of ``root``'s descendants alive now."""
     children: dict[int, list[tuple[int, list[str]]]] = {}
     for p in os.listdir("/proc"):
         if not p.isdigit():
@@ -62,15 +33,32 @@ def tree_cpu(root: int) -> float:
         except OSError:
             continue
         children.setdefault(int(fields[1]), []).append((int(p), fields))
-    tick = os.sysconf("SC_CLK_TCK")
-    total, stack, seen = 0.0, [root], set()
+    out, stack = {}, [root]
     while stack:
         for pid, fields in children.get(stack.pop(), []):
-            if pid not in seen:
-                seen.add(pid)
+            if pid not in out:
+                out[pid] = fields
                 stack.append(pid)
-                total += sum(int(fields[i]) for i in (11, 12, 13, 14)) / tick
-    return total
+    return out
+
+
+def cpu_s(fields: list[str], *, reaped: bool) -> float:
+    """User + sys CPU seconds of a process (``reaped``: with those of its reaped children)."""
+    return sum(int(fields[i]) for i in ((11, 12, 13, 14) if reaped else (11, 12))) / os.sysconf("SC_CLK_TCK")
+
+
+def command_line(pid: int) -> str:
+    """The process's command line ("" once it has ended)."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return f.read().replace(b"\0", b" ").decode(errors="replace").strip()
+    except OSError:
+        return ""
+
+
+def tree_cpu(root: int) -> float:
+    """CPU seconds (user + sys, and those of reaped children) of ``root``'s descendants alive now."""
+    return sum(cpu_s(fields, reaped=True) for fields in descendants(root).values())
 
 
 def main(argv: list[str]) -> int:
@@ -86,10 +74,11 @@ def main(argv: list[str]) -> int:
     seen: dict[int, tuple[float, float, str]] = {}  # pid: (first seen, CPU, command)
     while proc.poll() is None:
         time.sleep(0.5)
-        cpu, now = tree_cpu(os.getpid()), time.time() - t0
-        for pid, (pcpu, cmd) in tree_processes(os.getpid()).items():
+        tree, now = descendants(os.getpid()), time.time() - t0
+        cpu = sum(cpu_s(fields, reaped=True) for fields in tree.values())
+        for pid, fields in tree.items():
             first, _, known = seen.get(pid, (now, 0.0, ""))
-            seen[pid] = (first, pcpu, cmd or known)  # a process ending has no command line left
+            seen[pid] = (first, cpu_s(fields, reaped=False), known or command_line(pid))
         print(f"{now:7.2f} cpu {cpu:7.2f} cores {(cpu - last_cpu) / (now - last_t):4.2f}", flush=True)
         last_cpu, last_t = cpu, now
     small = [v for v in seen.values() if v[1] <= 0.5]
