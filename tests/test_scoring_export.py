@@ -9,7 +9,6 @@ import pytest
 from fuelhm_bench.errors import OutputPathError, ParameterError
 from fuelhm_bench.scoring import (plot_score_distributions, save_figure, score_run, to_latex,
                                   to_markdown, write_tables)
-from fuelhm_bench.scoring.export import _simple_latex
 
 from test_scoring_run import decisions, fleet_labels, make_run
 
@@ -30,13 +29,26 @@ def test_markdown_table():
     assert md[2] == r"| a\|b | 0.1235 | 3 | True |" and md[3] == "| c | NaN | 4 | False |"
 
 
-def test_simple_latex_escapes_and_aligns():
+def test_latex_escapes_and_aligns():
     df = pd.DataFrame({"mode_id": ["50%", "x&y"], "fpr": [0.5, 0.25]})
-    tex = _simple_latex(df, float_format=".3g", caption="Table V", label="tab:v")
+    tex = to_latex(df, float_format=".3g", caption="Table V", label="tab:v")
     assert r"\begin{tabular}{lr}" in tex and r"\caption{Table V}" in tex
     assert r"mode\_id & fpr \\" in tex and r"50\% & 0.5 \\" in tex and r"x\&y & 0.25 \\" in tex
     assert tex.strip().endswith(r"\end{table}")
-    assert "0.25" in to_latex(df)
+
+
+def test_latex_does_not_depend_on_jinja2(monkeypatch):
+    """One writer: the same bytes whether or not the optional jinja2 (pandas' to_latex) is importable."""
+    import importlib.util
+    import sys
+
+    df = pd.DataFrame({"mode": ["a_b", "c"], "rate": [0.123456, np.nan], "n": [3, 4], "ok": [True, False]})
+    before = to_latex(df, caption="x", label="t")
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "jinja2" else real(name, *a))
+    monkeypatch.setitem(sys.modules, "jinja2", None)
+    assert to_latex(df, caption="x", label="t") == before
+    assert r"a\_b & 0.1235 & 3 & True \\" in before and r"c & NaN & 4 & False \\" in before
 
 
 def test_write_tables_all_formats(card, tmp_path):

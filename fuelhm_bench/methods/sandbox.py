@@ -462,6 +462,7 @@ class SealedMethod:
         self._pump = None
         self._scratch = None
         self._deadline = math.inf
+        self._row_index = (None, ())  # (the last row's Index, its labels as a tuple): one conversion per table
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> dict:
@@ -609,7 +610,9 @@ class SealedMethod:
         from fuelhm_bench.methods.decision import Decision, decision_problem
 
         if hasattr(row, "index") and hasattr(row, "tolist"):  # a Series travels as plain tuples (cheap to pickle)
-            payload = {"row_index": tuple(row.index), "row_values": tuple(row.tolist())}
+            if row.index is not self._row_index[0]:  # rows of one table share their Index; a str Index iterates slowly
+                self._row_index = (row.index, tuple(row.index))
+            payload = {"row_index": self._row_index[1], "row_values": tuple(row.tolist())}
         else:
             payload = {"row": row}
         if raw is not None:

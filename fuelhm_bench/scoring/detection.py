@@ -74,25 +74,49 @@ def operating_points(flights: pd.DataFrame, model: HealthyScoreModel,
     return points
 
 
-def _unit_counts(flights: pd.DataFrame, detected: np.ndarray, mode: str) -> pd.DataFrame:
-    true_mode = flights["true_mode"].to_numpy()
+def _unit_counts(flights: pd.DataFrame, points, modes: list[str]) -> pd.DataFrame:
+    """Per-unit counts of every (operating point, mode), one row per unit in order of first appearance.
+
+    Columns: ``operating_point``, ``mode``, ``unit_id``, ``nfd, fp, fn, fd, n_incipient,
+    n_incipient_detected, n_healthy, n_detectable, n_detected, n_not_detected``. Counted with one
+    ``bincount`` per column over all flights at once (a groupby per point and mode cost most of
+    :func:`~fuelhm_bench.scoring.score_run`).
+    """
+    code, units = pd.factorize(flights["unit_id"], sort=False)
+    n_units = len(units)
+    true_mode = flights["true_mode"].to_numpy(dtype=object)
     healthy = true_mode == HEALTHY
-    member = np.ones(len(flights), bool) if mode == ALL_MODES else (true_mode == mode)
-    member &= ~healthy
-    detectable = member & flights["detectable"].to_numpy(dtype=bool)
-    incipient = member & flights["incipient"].to_numpy(dtype=bool)
+    detectable_any = flights["detectable"].to_numpy(dtype=bool)
+    incipient_any = flights["incipient"].to_numpy(dtype=bool)
+
+    def per_unit(mask: np.ndarray) -> np.ndarray:
+        return np.bincount(code[mask], minlength=n_units).astype(np.int64)
+
+    members = {mode: ~healthy if mode == ALL_MODES else (true_mode == mode) & ~healthy for mode in modes}
+    blocks = {c: [] for c in ("nfd", "fp", "fn", "fd", "n_incipient", "n_incipient_detected")}
+    for _, _, _, detected in points:
+        nfd, fp = per_unit(healthy & ~detected), per_unit(healthy & detected)
+        for mode in modes:
+            detectable = members[mode] & detectable_any
+            incipient = members[mode] & incipient_any
+            blocks["nfd"].append(nfd)
+            blocks["fp"].append(fp)
+            blocks["fn"].append(per_unit(detectable & ~detected))
+            blocks["fd"].append(per_unit(detectable & detected))
+            blocks["n_incipient"].append(per_unit(incipient))
+            blocks["n_incipient_detected"].append(per_unit(incipient & detected))
+    n_parts = len(points) * len(modes)
     c = pd.DataFrame({
-        "unit_id": flights["unit_id"].to_numpy(),
-        "nfd": healthy & ~detected, "fp": healthy & detected,
-        "fn": detectable & ~detected, "fd": detectable & detected,
-        "n_incipient": incipient, "n_incipient_detected": incipient & detected,
+        "operating_point": np.repeat(np.array([p[0] for p in points], dtype=object), len(modes) * n_units),
+        "mode": np.tile(np.repeat(np.array(modes, dtype=object), n_units), len(points)),
+        "unit_id": units.take(np.tile(np.arange(n_units), n_parts)),
+        **{name: np.concatenate(parts) if parts else np.zeros(0, np.int64) for name, parts in blocks.items()},
     })
-    per_unit = c.groupby("unit_id", sort=False).sum().astype(np.int64).reset_index()
-    per_unit["n_healthy"] = per_unit["fp"] + per_unit["nfd"]
-    per_unit["n_detectable"] = per_unit["fn"] + per_unit["fd"]
-    per_unit["n_detected"] = per_unit["fp"] + per_unit["fd"]
-    per_unit["n_not_detected"] = per_unit["fn"] + per_unit["nfd"]
-    return per_unit
+    c["n_healthy"] = c["fp"] + c["nfd"]
+    c["n_detectable"] = c["fn"] + c["fd"]
+    c["n_detected"] = c["fp"] + c["fd"]
+    c["n_not_detected"] = c["fn"] + c["nfd"]
+    return c
 
 
 def _notes(table: pd.DataFrame) -> list[str]:
@@ -133,15 +157,7 @@ def detection_table(flights: pd.DataFrame, model: HealthyScoreModel,
         rates.
     """
     config = ScoringConfig() if config is None else config
-    parts = []
-    modes = modes_present(flights) + [ALL_MODES]
-    for name, a, thr, detected in operating_points(flights, model, config):
-        for mode in modes:
-            c = _unit_counts(flights, detected, mode)
-            c.insert(0, "operating_point", name)
-            c.insert(1, "mode", mode)
-            parts.append(c)
-    counts = pd.concat(parts, ignore_index=True)
+    counts = _unit_counts(flights, operating_points(flights, model, config), modes_present(flights) + [ALL_MODES])
     out = rates_with_intervals(counts, keys=["operating_point", "mode"], counts=_COUNTS,
                                rates=_RATES, confidence=config.confidence,
                                n_bootstrap=config.n_bootstrap, random_state=config.random_state)
