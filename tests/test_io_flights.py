@@ -64,7 +64,7 @@ def minimal(flight_id=1, time_s=(0.0, 0.1, 0.2, 0.3), current=None, position=Non
         "flight_id": [flight_id] * n,
         "time_s": list(time_s),
         "current_mA": list(current) if current is not None else list(np.arange(n, dtype=float)),
-        "position_mm": list(position) if position is not None else [10.0] * n,
+        "position_mm": list(position) if position is not None else list(10.0 + 0.5 * np.arange(n)),
     }
     data.update(extra)
     return pd.DataFrame(data)
@@ -416,7 +416,7 @@ def test_single_sample_and_min_samples():
     )
     reason = only_rejection(minimal(), min_samples=5).reason
     assert reason == "Only 4 samples (at least 5 are required)."
-    table = minimal(time_s=(0.0, 0.0, 0.0), current=(1.0, 1.0, 1.0))
+    table = minimal(time_s=(0.0, 0.0, 0.0), current=(1.0, 1.0, 1.0), position=(2.0, 2.0, 2.0))
     reason = only_rejection(table).reason
     assert "Only 1 sample after dropping 2 repeated timestamp(s)" in reason
 
@@ -461,6 +461,16 @@ def test_optional_numeric_gaps_filled_when_short_else_left_nan():
     assert np.isnan(flight.extras["n2_pct"][3:7]).all()
 
 
+def test_constant_position_rejected_as_a_stuck_sensor():
+    """P9: an exactly constant position while the current varies is a stuck or disconnected sensor."""
+    reason = only_rejection(minimal(position=[30.0] * 4)).reason
+    assert reason.startswith("position_mm is constant (30 mm) over all 4 samples while the current varies: "
+                             "a stuck or disconnected position sensor")
+    assert only_flight(minimal(position=(30.0, 30.0, 30.015, 30.0))).n_samples == 4  # one quantum step is a reading
+    # P8 comes first: nothing varies at all is reported as the missing excitation
+    assert only_rejection(minimal(current=[1.0] * 4, position=[30.0] * 4)).reason.startswith("current_mA is constant")
+
+
 def test_constant_current_rejected():
     reason = only_rejection(minimal(current=[2.5] * 4)).reason
     assert reason.startswith("current_mA is constant (2.5 mA) over all 4 samples: no excitation")
@@ -482,7 +492,7 @@ def test_integer_unit_ids_with_missing_cells(tmp_path):
     path = tmp_path / "f.csv"
     path.write_text(
         "flight_id,unit_id,time_s,current_mA,position_mm,5\n"
-        "1,7,0,1,2,x\n1,,1,2,2,y\n2,8,0,1,2,z\n2,9,1,3,2,w\n"
+        "1,7,0,1,2,x\n1,,1,2,3,y\n2,8,0,1,2,z\n2,9,1,3,3,w\n"
     )
     table = read_flights(path)
     assert table["unit_id"].dtype == "Int64"

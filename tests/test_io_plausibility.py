@@ -85,6 +85,45 @@ def test_f6_absurd_value(tmp_path):
     assert "1 value(s) are out of range, the most extreme 1e+30 mA: not a measurement" in message
 
 
+def test_f7_demand_in_metres_and_n2_as_a_fraction(tmp_path):
+    table = flight_table()
+    table["demand_mm"] = table["position_mm"] / 1000.0
+    path = tmp_path / "demand.parquet"
+    table.to_parquet(path)
+    with pytest.raises(DataFormatError, match=r"Column 'demand_mm' .* metres instead of millimetres") as info:
+        read_flights(path)
+    assert str(path) in str(info.value)
+    table = flight_table()
+    table["n2_pct"] = np.linspace(0.55, 0.97, len(table))  # N2 as a fraction of the rated speed
+    table.to_parquet(path)
+    with pytest.raises(DataFormatError, match=r"Column 'n2_pct' .* ranges over only \[0\.55, 0\.97\] % .* fraction "
+                                              r"of the rated speed instead of percent \(multiply by 100\)"):
+        read_flights(path)
+    table["n2_pct"] = 0.0  # an engine-off recording is allowed
+    table.to_parquet(path)
+    assert (read_flights(path)["n2_pct"] == 0.0).all()
+
+
+def test_f8_ignores_flights_out_of_time_order(tmp_path):
+    """Shuffled rows are not mistaken for milliseconds: P4 rejects each flight, saying why."""
+    from fuelhm_bench.io import split_flights
+
+    table = flight_table().sample(frac=1.0, random_state=3).reset_index(drop=True)
+    path = tmp_path / "shuffled.parquet"
+    table.to_parquet(path)
+    flights, rejected = split_flights(read_flights(path), source=str(path))
+    assert flights == [] and len(rejected) == 2
+    assert all("the samples of a flight must be in increasing time order" in r.reason for r in rejected)
+    ordered = flight_table()  # one flight in order, one shuffled: F8 judges the ordered one
+    ordered.loc[ordered["flight_id"] == 1] = ordered.loc[ordered["flight_id"] == 1].sample(frac=1.0, random_state=4).to_numpy()
+    ordered.to_parquet(path)
+    assert [f.flight_id for f in split_flights(read_flights(path))[0]] == [0]
+    ordered["time_s"] *= 1000.0  # and still catches milliseconds in it
+    ordered.to_parquet(path)
+    with pytest.raises(DataFormatError, match="milliseconds instead of seconds"):
+        read_flights(path)
+
+
 def test_f6_and_f8_time_in_milliseconds(tmp_path):
     message = read_mutated(tmp_path, time_s=lambda t: t * 1000.0)
     assert "Column 'time_s'" in message and "median sampling interval of 10 s" in message
@@ -113,6 +152,19 @@ def test_bench_samples_are_exempt_from_the_position_range(tmp_path):
         read_flights(path)
 
 
+@pytest.mark.parametrize("command", ["discrepancy", "calibrate"])
+def test_commands_say_when_every_flight_was_rejected(tmp_path, capsys, command):
+    table = flight_table()
+    table["position_mm"] = 30.0  # both flights: a stuck sensor (rule P9)
+    src = tmp_path / "stuck.csv"
+    table.to_csv(src, index=False)
+    out = tmp_path / ("report" if command == "discrepancy" else "model.yaml")
+    assert main([command, str(src), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{src}: every flight of the file was rejected (2 flight(s))" in err
+    assert "a stuck or disconnected position sensor" in err and not out.exists()
+
+
 @pytest.mark.parametrize("command", ["indicators", "plot-curve"])
 def test_commands_refuse_current_in_amperes_and_write_nothing(tmp_path, capsys, command):
     table = flight_table()
@@ -128,7 +180,7 @@ def test_commands_refuse_current_in_amperes_and_write_nothing(tmp_path, capsys, 
 
 def test_indicators_refuses_a_table_without_a_valid_indicator(tmp_path, capsys):
     table = flight_table(1, n=400)
-    table["position_mm"] = 60.0  # rod held on the end stop: every sample masked
+    table["position_mm"] = 60.0 + 0.015 * (np.arange(len(table)) % 2)  # rod on the end stop: every sample masked
     src = tmp_path / "stuck.csv"
     table.to_csv(src, index=False)
     out = tmp_path / "ind.csv"

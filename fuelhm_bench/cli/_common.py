@@ -109,6 +109,27 @@ def check_run_budget(units: int, flights: int, minutes: float, frame_rate_hz: fl
             f"{RUN_BUDGET_ENV}={math.ceil(cost.flight_hours)}.")
 
 
+def usable_flights(path) -> list:
+    """The flights of a measured-data file that pass the per-flight rules (docs/data-format.md §2.2).
+
+    Each rejected flight is reported on stderr as a warning; a file none of whose flights is usable
+    raises :class:`~fuelhm_bench.errors.DataFormatError` naming the file, how many flights were
+    rejected and the first reason (a command never goes on with nothing, nor fails later with a
+    message that hides why).
+    """
+    from fuelhm_bench.errors import DataFormatError
+    from fuelhm_bench.io import read_flights, split_flights
+
+    flights, rejected = split_flights(read_flights(path), source=str(path))
+    for r in rejected:
+        print(f"warning: {r}", file=sys.stderr)
+    if not flights:
+        raise DataFormatError(f"{path}: every flight of the file was rejected ({len(rejected)} flight(s)), so there "
+                              f"is nothing to analyse. The first: {rejected[0].reason}" if rejected else
+                              f"{path}: the file holds no flight.")
+    return flights
+
+
 def progress_bar(total: int, desc: str, unit: str = "flight"):
     """A tqdm progress bar on stderr, silent when stderr is not a terminal or in CI."""
     from tqdm.auto import tqdm

@@ -31,17 +31,14 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.calibration.recalibrate import RECALIBRATION_PARAMETERS, CalibrationConfig, recalibrate
     from fuelhm_bench.calibration.report import calibration_summary, plot_curves
-    from fuelhm_bench.cli._common import check_output, progress_bar
-    from fuelhm_bench.io import read_flights, split_flights
+    from fuelhm_bench.cli._common import check_output, progress_bar, usable_flights
     from fuelhm_bench.io.outputs import atomic_output
     from fuelhm_bench.physics.model import load_model, save_model
 
     out = check_output(args.out, force=args.force)
     plot = check_output(args.plot, force=args.force, option="--plot") if args.plot else None
     start = load_model(args.model) if args.model else None
-    flights, rejected = split_flights(read_flights(args.flights), source=str(args.flights))
-    for r in rejected:
-        print(f"warning: {r}", file=sys.stderr)
+    flights = usable_flights(args.flights)
     config = CalibrationConfig(seed=args.seed)
     n_par = len(RECALIBRATION_PARAMETERS)
     # Upper bound of the replays: one per iteration plus one Jacobian (n_par replays) per iteration.

@@ -72,14 +72,11 @@ def _run(args: argparse.Namespace, config, out_dir) -> int:
 
     from fuelhm_bench.calibration.discrepancy import find_discrepancy
     from fuelhm_bench.calibration.report import json_text, write_discrepancy_report
-    from fuelhm_bench.cli._common import progress_bar
-    from fuelhm_bench.io import read_flights, split_flights
+    from fuelhm_bench.cli._common import progress_bar, usable_flights
     from fuelhm_bench.physics.model import load_model, save_model
 
     model = load_model(args.model) if args.model else None
-    flights, rejected = split_flights(read_flights(args.flights), source=str(args.flights))
-    for r in rejected:
-        print(f"warning: {r}", file=sys.stderr)
+    flights = usable_flights(args.flights)
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr)

@@ -53,13 +53,16 @@ F6. Every finite value of a numeric column lies within its plausible range
     Samples of a virtual bench without end stops (``phase`` equal to
     :data:`BENCH_PHASE`, written by ``fuelhm-bench sweep``) are exempt for
     ``position_mm``.
-F7. Columns that are 1000 times too small: ``current_mA`` with every value
-    within +-0.1 mA (but not all zero) looks like amperes; ``position_mm`` with
-    every value within +-0.1 mm (but not all zero) looks like metres.
+F7. Columns in a unit too small (every value within a limit, but not all zero):
+    ``current_mA`` within +-0.1 mA looks like amperes; ``position_mm`` and
+    ``demand_mm`` within +-0.1 mm look like metres; ``n2_pct`` within +-1.5 %
+    looks like a fraction of the rated speed instead of percent (a running
+    engine is above 50 % at ground idle).
 F8. The median interval between consecutive samples of a flight (over the
-    whole file) lies in [1e-4, 1] s, i.e. a sampling rate of 1 Hz to 10 kHz
-    (the frame rates a scenario allows); a median interval of several seconds
-    means times in milliseconds.
+    flights of the file whose ``time_s`` never decreases) lies in [1e-4, 1] s,
+    i.e. a sampling rate of 1 Hz to 10 kHz (the frame rates a scenario allows);
+    a median interval of several seconds means times in milliseconds. Flights
+    out of time order do not count (rule P4 rejects them, saying so).
 
 Per-flight rules
 ----------------
@@ -93,6 +96,8 @@ P7. ``current_mA`` and ``position_mm`` have no infinite value. Runs of up to
 P8. The current must excite the loop: ``max(current_mA) - min(current_mA)``
     must exceed ``min_current_range_ma`` (default 0 mA, i.e. an exactly
     constant current is rejected).
+P9. The position must not be exactly constant over the flight (a stuck or
+    disconnected sensor: a real LVDT reading carries noise).
 
 Labels
 ------
@@ -194,10 +199,19 @@ _TOO_LARGE_UNITS: dict[str, str] = {
     "position_mm": "micrometres instead of millimetres (divide by 1000)",
     "demand_mm": "micrometres instead of millimetres (divide by 1000)",
 }
-#: Rule F7: columns whose values all within +-limit look 1000 times too small.
+#: Rule F7: columns whose values all within +-limit are in a unit too small (1000 or 100 times).
 _TOO_SMALL: dict[str, tuple[float, str]] = {
     "current_mA": (0.1, "amperes instead of milliamperes (multiply by 1000)"),
     "position_mm": (0.1, "metres instead of millimetres (multiply by 1000)"),
+    "demand_mm": (0.1, "metres instead of millimetres (multiply by 1000)"),
+    "n2_pct": (1.5, "a fraction of the rated speed instead of percent (multiply by 100)"),
+}
+#: Rule F7: what each column of :data:`_TOO_SMALL` measures, for its message.
+_QUANTITY: dict[str, str] = {
+    "current_mA": "current of the actuation loop",
+    "position_mm": "position of the actuation loop",
+    "demand_mm": "position demand of the actuation loop (stroke 60 mm)",
+    "n2_pct": "engine core speed of a recording (ground idle is above 50 %)",
 }
 #: Rule F8: plausible median sampling interval [s] (10 kHz to 1 Hz).
 PLAUSIBLE_SAMPLING_S: tuple[float, float] = (1e-4, 1.0)
@@ -256,7 +270,7 @@ class FlightArrays:
     Arrays are converted to read-only views (float64 for the numeric ones),
     so a flight cannot be altered after construction. Flights from
     :func:`iter_flights` are raw (file order, possibly NaN); flights from
-    :func:`split_flights` / :func:`check_flight` satisfy rules P2-P8 (strictly
+    :func:`split_flights` / :func:`check_flight` satisfy rules P2-P9 (strictly
     increasing time, finite current and position).
     """
 
@@ -622,15 +636,22 @@ def check_plausibility(table: pd.DataFrame, *, source: str = "<table>") -> None:
             if 0.0 < magnitude < limit:
                 raise DataFormatError(
                     f"Column '{column}' of '{source}' ranges over only {_range_text(values)} {unit} (every "
-                    f"value within +-{limit:g} {unit}): implausibly small for the {column.split('_')[0]} of the "
-                    f"actuation loop. It looks like {likely}.")
+                    f"value within +-{limit:g} {unit}): implausibly small for the {_QUANTITY[column]}. It looks "
+                    f"like {likely}.")
     _check_sampling(table, source)
 
 
 def _check_sampling(table: pd.DataFrame, source: str) -> None:
-    """Rule F8: the median interval between consecutive samples of a flight."""
-    steps = table.groupby("flight_id", sort=False)["time_s"].diff().to_numpy()
-    steps = steps[np.isfinite(steps) & (steps > 0)]
+    """Rule F8: the median interval between consecutive samples of a flight.
+
+    Only flights whose ``time_s`` never decreases count: the steps of a flight out of time order
+    (rows shuffled, a clock reset) say nothing about the unit of the column, and rule P4
+    rejects such a flight with its own reason.
+    """
+    steps = table.groupby("flight_id", sort=False)["time_s"].diff()
+    backwards = steps.lt(0).groupby(table["flight_id"], sort=False).transform("any").to_numpy(dtype=bool)
+    steps = steps.to_numpy()
+    steps = steps[np.isfinite(steps) & (steps > 0) & ~backwards]
     if steps.size == 0:
         return
     median = float(np.median(steps))
@@ -1024,7 +1045,7 @@ def check_flight(
     max_nan_gap: int = DEFAULT_MAX_NAN_GAP,
     min_current_range_ma: float = DEFAULT_MIN_CURRENT_RANGE_MA,
 ) -> FlightArrays | FlightRejection:
-    """Apply the per-flight rules P3-P8 to one flight.
+    """Apply the per-flight rules P3-P9 to one flight.
 
     Parameters
     ----------
@@ -1061,7 +1082,7 @@ def check_flight(
 def _apply_rules(
     flight: FlightArrays, min_samples: int, max_nan_gap: int, min_current_range_ma: float
 ) -> FlightArrays | str:
-    """Rules P3-P8; return the cleaned flight or a rejection sentence."""
+    """Rules P3-P9; return the cleaned flight or a rejection sentence."""
     reason = _time_problem(flight.time_s)
     if reason is not None:
         return reason
@@ -1075,6 +1096,8 @@ def _apply_rules(
     if isinstance(filled, str):
         return filled
     reason = _excitation_problem(filled.current_ma, min_current_range_ma)
+    if reason is None:
+        reason = _stuck_position_problem(filled.position_mm)
     return filled if reason is None else reason
 
 
@@ -1229,6 +1252,17 @@ def _excitation_problem(current_ma: np.ndarray, min_current_range_ma: float) -> 
     return (
         f"current_mA spans only {span:g} mA over {current_ma.size} samples (more than "
         f"{min_current_range_ma:g} mA is required): no excitation, the loop cannot be monitored."
+    )
+
+
+def _stuck_position_problem(position_mm: np.ndarray) -> str | None:
+    """Rule P9: a position exactly constant over the whole flight is a stuck or disconnected sensor."""
+    if float(np.ptp(position_mm)) > 0.0:
+        return None
+    return (
+        f"position_mm is constant ({position_mm[0]:g} mm) over all {position_mm.size} samples while "
+        "the current varies: a stuck or disconnected position sensor (a real LVDT reading always "
+        "carries noise)."
     )
 
 
