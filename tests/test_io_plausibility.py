@@ -1,4 +1,4 @@
-"""Plausibility rules F6-F8 of the flight reader, and the commands that must not draw nonsense.
+"""Plausibility rules F6-F9 of the flight reader, and the commands that must not draw nonsense.
 
 Each unit mistake of issue 9 section 3 (current in A, position in m, time in
 ms, absurd values) is refused with a message naming the file, the column, the
@@ -122,6 +122,35 @@ def test_f8_ignores_flights_out_of_time_order(tmp_path):
     ordered.to_parquet(path)
     with pytest.raises(DataFormatError, match="milliseconds instead of seconds"):
         read_flights(path)
+
+
+@pytest.mark.parametrize("flip", ["current", "position"])
+def test_f9_reversed_sign_convention(tmp_path, flip):
+    table = flight_table()
+    if flip == "current":
+        table["current_mA"] = -table["current_mA"]
+    else:
+        table["position_mm"] = 60.0 - table["position_mm"]
+    path = tmp_path / "flipped.parquet"
+    table.to_parquet(path)
+    with pytest.raises(DataFormatError) as info:
+        read_flights(path)
+    message = str(info.value)
+    assert str(path) in message and "falls when current_mA rises" in message
+    assert re.search(r"correlation is -0\.\d\d \(median over 2 flight\(s\), negative in 2\)", message), message
+    assert "negate current_mA" in message and "stroke - position" in message
+
+
+def test_f9_needs_a_majority_and_enough_steps(tmp_path):
+    table = flight_table(3)
+    table.loc[table["flight_id"] == 2, "current_mA"] *= -1.0  # one odd flight of three: read
+    path = tmp_path / "one.parquet"
+    table.to_parquet(path)
+    assert len(read_flights(path)) == len(table)
+    short = flight_table(2, n=60)  # under 100 steps a flight does not count
+    short["current_mA"] *= -1.0
+    short.to_parquet(path)
+    assert len(read_flights(path)) == 120
 
 
 def test_f6_and_f8_time_in_milliseconds(tmp_path):

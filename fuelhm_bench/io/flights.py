@@ -213,6 +213,10 @@ _QUANTITY: dict[str, str] = {
     "demand_mm": "position demand of the actuation loop (stroke 60 mm)",
     "n2_pct": "engine core speed of a recording (ground idle is above 50 %)",
 }
+#: Rule F9: flights with fewer valid steps do not count in the sign-convention check.
+_SIGN_MIN_STEPS: int = 100
+#: Rule F9: the median correlation of current and rod velocity below which the file is refused.
+_SIGN_MIN_CORRELATION: float = -0.3
 #: Rule F8: plausible median sampling interval [s] (10 kHz to 1 Hz).
 PLAUSIBLE_SAMPLING_S: tuple[float, float] = (1e-4, 1.0)
 
@@ -587,7 +591,7 @@ def _range_text(values: np.ndarray) -> str:
 
 
 def check_plausibility(table: pd.DataFrame, *, source: str = "<table>") -> None:
-    """Apply the plausibility rules F6-F8 to a validated flight table.
+    """Apply the plausibility rules F6-F9 to a validated flight table.
 
     Parameters
     ----------
@@ -639,6 +643,52 @@ def check_plausibility(table: pd.DataFrame, *, source: str = "<table>") -> None:
                     f"value within +-{limit:g} {unit}): implausibly small for the {_QUANTITY[column]}. It looks "
                     f"like {likely}.")
     _check_sampling(table, source)
+    _check_sign_convention(table, source)
+
+
+def _check_sign_convention(table: pd.DataFrame, source: str) -> None:
+    """Rule F9: positive current extends the rod, so current and rod velocity correlate positively.
+
+    Per flight (in time order, with at least :data:`_SIGN_MIN_STEPS` finite steps), the Pearson
+    correlation of the rod velocity ``d(position_mm)/dt`` with the current at mid-step; the file is
+    refused when the median over those flights is below :data:`_SIGN_MIN_CORRELATION`.
+    """
+    codes = pd.factorize(table["flight_id"], sort=False)[0]
+    grouped = table.groupby(codes, sort=False)
+    dt = grouped["time_s"].diff().to_numpy()
+    dx = grouped["position_mm"].diff().to_numpy()
+    current = table["current_mA"].to_numpy()
+    mid = 0.5 * (current + grouped["current_mA"].shift().to_numpy())
+    backwards = np.zeros(codes.max() + 1 if codes.size else 0, dtype=bool)
+    np.logical_or.at(backwards, codes[dt < 0], True)
+    ok = np.isfinite(dt) & (dt > 0) & np.isfinite(dx) & np.isfinite(mid) & ~backwards[codes]
+    if not ok.any():
+        return
+    g, v, i = codes[ok], dx[ok] / dt[ok], mid[ok]
+    n_groups = backwards.size
+
+    def total(values: np.ndarray) -> np.ndarray:
+        return np.bincount(g, weights=values, minlength=n_groups)
+
+    n = np.bincount(g, minlength=n_groups).astype(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mv, mi = total(v) / n, total(i) / n
+        cov = total(v * i) / n - mv * mi
+        var_v, var_i = total(v * v) / n - mv**2, total(i * i) / n - mi**2
+        r = cov / np.sqrt(var_v * var_i)
+    usable = (n >= _SIGN_MIN_STEPS) & (var_v > 0) & (var_i > 0) & np.isfinite(r)
+    if not usable.any():
+        return
+    median = float(np.median(r[usable]))
+    if median >= _SIGN_MIN_CORRELATION:
+        return
+    negative = int((r[usable] < 0).sum())
+    raise DataFormatError(
+        f"In '{source}' the rod velocity d(position_mm)/dt falls when current_mA rises: their correlation is "
+        f"{median:.2f} (median over {int(usable.sum())} flight(s), negative in {negative}), where a positive "
+        f"current extends the rod (position_mm increasing) and the two correlate at about +0.9. One of the two "
+        f"columns has the opposite sign convention: negate current_mA, or give the position as measured from "
+        f"the retracted end (stroke - position).")
 
 
 def _check_sampling(table: pd.DataFrame, source: str) -> None:
