@@ -168,6 +168,16 @@ def test_f6_fuel_temperature_in_kelvin(tmp_path):
         read_flights(path)
 
 
+def test_f6_n2_in_rpm(tmp_path):
+    table = flight_table()
+    table["n2_pct"] = np.linspace(8500.0, 15200.0, len(table))
+    path = tmp_path / "rpm.parquet"
+    table.to_parquet(path)
+    with pytest.raises(DataFormatError, match=r"Column 'n2_pct' .* It looks like revolutions per minute instead of "
+                                              r"percent of the reference speed"):
+        read_flights(path)
+
+
 def test_bench_samples_are_exempt_from_the_position_range(tmp_path):
     table = flight_table(1)
     table["position_mm"] = np.linspace(-1500.0, 1600.0, len(table))

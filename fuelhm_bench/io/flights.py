@@ -49,7 +49,8 @@ F6. Every finite value of a numeric column lies within its plausible range
     ``position_mm`` and ``demand_mm`` within +-1000 mm (the stroke is 60 mm),
     ``n2_pct`` in [-1, 200] %, ``fuel_temp_degC`` in [-100, 200] degC. Values
     1000 times too large are reported as the likely unit mistake (ms for s, uA
-    for mA, um for mm), kelvin for degC; others (e.g. 1e30) as corrupt values.
+    for mA, um for mm), kelvin for degC, rpm for N2 percent; others (e.g. 1e30)
+    as corrupt values.
     Samples of a virtual bench without end stops (``phase`` equal to
     :data:`BENCH_PHASE`, written by ``fuelhm-bench sweep``) are exempt for
     ``position_mm``.
@@ -624,6 +625,9 @@ def check_plausibility(table: pd.DataFrame, *, source: str = "<table>") -> None:
                 likely = f"It looks like {_TOO_LARGE_UNITS[column]}."
             elif column == "fuel_temp_degC" and ((values - 273.15 >= lo) & (values - 273.15 <= hi)).all():
                 likely = "It looks like kelvin instead of degrees Celsius (subtract 273.15)."
+            elif column == "n2_pct" and values.min() >= 0.0 and 1000.0 <= values.max() <= 100000.0:
+                likely = ("It looks like revolutions per minute instead of percent of the reference speed "
+                          "(divide by the reference speed in rpm, multiply by 100).")
             else:
                 worst = values[bad][np.argmax(np.abs(values[bad]))]
                 likely = (f"{int(bad.sum())} value(s) are out of range, the most extreme {worst:.4g} {unit}: "
