@@ -500,6 +500,7 @@ def test_integer_unit_ids_with_missing_cells(tmp_path):
     flights, rejections = split_flights(table, source=str(path))
     assert flights[0].unit_id == 7 and type(flights[0].unit_id) is int
     assert "2 different unit_id values (8, 9)" in rejections[0].reason
+    assert "make flight_id unique in the file (e.g. '<unit>-<flight>')" in rejections[0].reason
     write_flights(table, tmp_path / "g.parquet")
     assert read_flights(tmp_path / "g.parquet")["unit_id"].tolist()[:2] == [7, pd.NA]
 

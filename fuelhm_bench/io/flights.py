@@ -959,7 +959,8 @@ def _groups(table: pd.DataFrame) -> Iterator[_RawGroup]:
 def _several_units_reason(units: tuple[FlightId, ...]) -> str:
     return (
         f"Its samples carry {len(units)} different unit_id values "
-        f"({', '.join(repr(u) for u in units[:5])}); a flight belongs to one unit."
+        f"({', '.join(repr(u) for u in units[:5])}); a flight belongs to one unit. If flights are numbered "
+        "per unit, make flight_id unique in the file (e.g. '<unit>-<flight>')."
     )
 
 
