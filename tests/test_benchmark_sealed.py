@@ -102,3 +102,86 @@ def test_a_reply_is_json_never_pickle(evaluation):
         scores = m.scores(evaluation.calibration_indicators)
         assert scores.dtype == np.float64 and np.all(np.isfinite(scores))
         assert m.sandbox.startswith(("landlock", "no file-system restriction"))
+
+
+_OUTSIDER = '''
+import multiprocessing.pool
+import os
+
+import numpy as np
+from sklearn.ensemble import IsolationForest
+
+from fuelhm_bench.methods import BaseMethod, Decision
+from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+
+def _try(what, fn):
+    try:
+        fn()
+        print(what, "ok", flush=True)
+    except OSError as exc:
+        print(what, "denied", type(exc).__name__, flush=True)
+
+
+class Outsider(BaseMethod):
+    """What a researcher's own module does: lives in the working directory, uses n_jobs and a thread pool."""
+
+    def _fit(self, table, *, knowledge, raw_flights, rng):
+        x = np.nan_to_num(table[list(INDICATOR_NAMES)].to_numpy(dtype=float))
+        self.forest_ = IsolationForest(n_estimators=20, n_jobs=2, random_state=0).fit(x)
+        with multiprocessing.pool.ThreadPool(2) as pool:
+            assert pool.map(abs, [-1, -2]) == [1, 2]
+        print("POOL ok", flush=True)
+        _try("NOTES", lambda: open(os.path.join(PROJECT, "notes.txt")).read())
+        _try("LABELS", lambda: open(os.path.join(PROJECT, "results", "labels.csv")).read())
+        _try("LISTING", lambda: os.listdir(PROJECT))
+
+    def _decide(self, row):
+        return Decision(score=0.0, alarm=False, guilt=np.zeros(7))
+'''
+
+
+def test_an_outsider_module_in_the_working_directory(evaluation, tmp_path, monkeypatch):
+    """A method module beside the output folder imports (the folder stays sealed) and may use n_jobs / thread pools.
+
+    Before: with ``--out`` inside the working directory the whole directory was left unreadable, so
+    ``mymodule:Method`` failed with "No module named 'mymodule'"; and any ``multiprocessing`` lock (a
+    thread pool's, hence scikit-learn's ``n_jobs``) failed with PermissionError (no /dev/shm).
+    """
+    project = tmp_path / "project"
+    (project / "results").mkdir(parents=True)
+    (project / "results" / "labels.csv").write_text("flight_id,onset_internal_leakage\n0,3\n")
+    (project / "notes.txt").write_text("the researcher's own file\n")
+    (project / "outsider_method.py").write_text(f"PROJECT = {str(project)!r}\n" + _OUTSIDER)
+    monkeypatch.chdir(project)
+    log = tmp_path / "outsider.log"
+    outcome = run_in_env("outsider_method:Outsider", evaluation, log_path=log, deny=[str(project / "results")],
+                         timeout_s=120)
+    assert outcome.ok, (outcome.message, log.read_text()[-2000:])
+    text = log.read_text()
+    assert "POOL ok" in text and "NOTES ok" in text and "LISTING ok" in text, text[-2000:]
+    if outcome.sandbox.startswith("no file-system restriction"):
+        pytest.skip(f"the module imports and pools work, but the file system is not sealed here: {outcome.sandbox}")
+    assert "LABELS denied PermissionError" in text, text[-2000:]
+
+
+def test_readable_around_a_denied_folder(tmp_path):
+    """The read rules of a directory holding a denied folder: every entry but the way to it, no symlink into it."""
+    from fuelhm_bench.methods.sandbox import _readable_around
+
+    root = (tmp_path / "project").resolve()
+    (root / "sub" / "out").mkdir(parents=True)
+    (root / "sub" / "out" / "labels.csv").write_text("x")
+    (root / "a.py").write_text("")
+    (root / "sub" / "b.txt").write_text("")
+    (root / "pkg").mkdir()
+    (root / "link").symlink_to(root / "sub" / "out" / "labels.csv")
+    (root / "dirlink").symlink_to(root / "sub")  # resolves to a directory that holds the denied one
+    other = (tmp_path / "other").resolve()
+    other.mkdir()
+    readable, listable = _readable_around([str(root), str(other), str(root / "sub" / "out" / "x")],
+                                          [str(root / "sub" / "out")])
+    assert sorted(readable) == sorted([str(root / "a.py"), str(root / "pkg"), str(root / "sub" / "b.txt"), str(other)])
+    assert len(set(readable)) == len(readable)
+    assert listable == [str(root), str(root / "sub")]
+    assert _readable_around([str(root)], []) == ([str(root)], [])

@@ -19,6 +19,11 @@ import traceback
 # --------------------------------------------------------------------------- Landlock (linux/landlock.h)
 _SYS_CREATE, _SYS_ADD_RULE, _SYS_RESTRICT = 444, 445, 446  # same numbers on x86_64 and aarch64
 _READ = (1 << 0) | (1 << 2) | (1 << 3)  # EXECUTE, READ_FILE, READ_DIR
+_LIST = 1 << 3  # READ_DIR only: a directory around a denied path (names listed, no file read)
+#: Writable besides the scratch directory: POSIX semaphores (``sem_open``) live in /dev/shm, and every
+#: ``multiprocessing`` lock needs one, even a thread pool's (joblib's threading backend, hence
+#: scikit-learn's ``n_jobs``); without it such a method failed with PermissionError in fit.
+_SHARED_MEMORY = [d for d in ("/dev/shm",) if os.path.isdir(d)]
 _FILE_RIGHTS = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 14) | (1 << 15)
 
 
@@ -32,7 +37,7 @@ class _PathBeneath(ctypes.Structure):
     _fields_ = [("allowed_access", ctypes.c_uint64), ("parent_fd", ctypes.c_int32)]
 
 
-def _landlock(readable: list[str], writable: list[str]) -> str:
+def _landlock(readable: list[str], writable: list[str], listable: list[str] = ()) -> str:
     """Restrict this process; returns a description of the sandbox applied."""
     if not sys.platform.startswith("linux"):
         return "no file-system restriction (not Linux)"
@@ -56,7 +61,7 @@ def _landlock(readable: list[str], writable: list[str]) -> str:
     if fd < 0:
         return "no file-system restriction (Landlock ruleset refused)"
     try:
-        for paths, rights in ((readable, _READ), (writable, handled)):
+        for paths, rights in ((readable, _READ), (writable, handled), (listable, _LIST)):
             for p in paths:
                 try:
                     pfd = os.open(p, os.O_PATH | os.O_CLOEXEC)
@@ -131,7 +136,7 @@ class _Child:
 
         sandbox = _landlock(p["readable"] + ["/usr", "/lib", "/lib64", "/etc", "/proc", "/sys", "/dev/urandom",
                                              "/dev/null", "/dev/zero"],
-                            [p["scratch"], "/dev/null"])
+                            [p["scratch"], "/dev/null", *_SHARED_MEMORY], p.get("listable", []))
         method = p["method"]
         if isinstance(method, str):
             self.method = load_method(method, p["params"])

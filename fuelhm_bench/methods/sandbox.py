@@ -207,6 +207,55 @@ def _python_roots() -> list[str]:
     return sorted(roots)
 
 
+def _inside(root: str, path: str) -> bool:
+    """Whether ``path`` is ``root`` or lies beneath it (both resolved)."""
+    return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+
+
+def _readable_around(roots, deny: list[str]) -> tuple[list[str], list[str]]:
+    """The Landlock read rules for ``roots`` minus the ``deny`` hierarchies (all paths resolved there).
+
+    A root inside a denied path is dropped. A root that *contains* a denied path (a working
+    directory holding the output folder, a home directory holding the simulation cache) is not
+    dropped whole, which would make a method's own module unimportable: its entries are granted one
+    by one, descending only along the way to the denied path, and the directories on that way are
+    returned as *listable* (their names may be listed, which Python's import system needs; no file
+    beneath a denied path can be read). An entry whose resolved target (a symbolic link) lies in,
+    or contains, a denied path is left out.
+
+    Returns
+    -------
+    readable, listable : list of str
+    """
+    deny = [d.rstrip(os.sep) or os.sep for d in deny]
+    readable: list[str] = []
+    listable: list[str] = []
+
+    def visit(path: str) -> None:
+        try:
+            real = str(Path(path).resolve())
+        except (OSError, RuntimeError):
+            return
+        if any(_inside(d, real) for d in deny):
+            return  # the denied path itself, or beneath it
+        if not any(_inside(real, d) for d in deny):
+            readable.append(real)
+            return
+        if not os.path.isdir(real):
+            return
+        listable.append(real)
+        try:
+            entries = sorted(os.scandir(real), key=lambda e: e.name)
+        except OSError:
+            return
+        for entry in entries:
+            visit(entry.path)
+
+    for root in roots:
+        visit(str(root))
+    return list(dict.fromkeys(readable)), list(dict.fromkeys(listable))
+
+
 def _import_path() -> list[str]:
     """The import path a sealed process gets: this process's working directory and ``sys.path``."""
     return [os.path.abspath(p) for p in ([os.getcwd()] + sys.path) if p]
@@ -430,8 +479,10 @@ class SealedMethod:
     log_path : path-like, optional
         Where the method's stdout/stderr go (cut at ``limits.log_kb``); None: dropped.
     deny : sequence of path-like, default=()
-        Paths the method must not read (simulation cache, output folder): an
-        import-path directory that contains one is not made readable.
+        Paths the method must not read (simulation cache, output folder). An
+        import-path directory that contains one stays readable around it
+        (:func:`_readable_around`): a method's module in the working directory
+        imports even when the output folder is inside it.
     zygote : bool, default=True
         Fork the sealed process from this process's zygote (a clean interpreter
         with the harness's dependencies imported, see
@@ -492,10 +543,10 @@ class SealedMethod:
             root = _package_root(name)
             if root is not None:
                 readable.append(str(root))
-        readable += [p for p in path if os.path.isdir(p) and not any(self._contains(p, d) for d in self.deny)]
+        readable += [p for p in path if os.path.isdir(p)]
         if not isinstance(self.method, str):  # an instance: the packages its module needed are imported here
             readable += [r for r in _imported_roots() if not any(self._contains(d, r) for d in self.deny)]
-        readable = [p for p in dict.fromkeys(readable) if not any(self._contains(p, d) for d in self.deny)]
+        readable, listable = _readable_around(dict.fromkeys(readable), self.deny)
         method = self.method
         if not isinstance(method, str):  # by value when its class is not importable (a notebook, a script)
             try:
@@ -522,15 +573,14 @@ class SealedMethod:
         self._deadline = time.monotonic() + self.limits.wall_s  # the method's clock starts here
         init = {"method": method, "params": self.params, "shared_params": self.shared_params,
                 "cpu_s": self.limits.cpu_limit_s, "memory_bytes": int(self.limits.memory_mb * 1024 * 1024),
-                "readable": readable, "scratch": scratch, "sys_path": path}
+                "readable": readable, "listable": listable, "scratch": scratch, "sys_path": path}
         self.info = self._call("start", init, phase="import and construction")
         self.sandbox = self.info.get("sandbox", "")
         return self.info
 
     @staticmethod
     def _contains(root: str, path: str) -> bool:
-        root = str(Path(root).resolve())
-        return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+        return _inside(str(Path(root).resolve()), path)
 
     def close(self) -> None:
         """Kill the method's whole process group and remove its scratch directory."""
