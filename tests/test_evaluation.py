@@ -8,7 +8,7 @@ import pytest
 from fuelhm_bench.cli import main
 from fuelhm_bench.errors import MethodError, ParameterError
 from fuelhm_bench.benchmark.loading import parse_params
-from fuelhm_bench.methods.loading import load_method
+from fuelhm_bench.methods.loading import entry_point_problem, load_method
 
 
 @pytest.fixture(scope="module")
@@ -22,6 +22,10 @@ def tiny(tmp_path_factory):
 def test_load_method_errors():
     with pytest.raises(MethodError, match="must look like"):
         load_method("fuelhm_baselines.trivial")
+    for bad in ("a:B:C", "a.:B", "1mod:C", " mod:C", "mod:", ":C"):
+        assert entry_point_problem(bad) is not None, bad
+    assert entry_point_problem("fuelhm_baselines.trivial:NullMethod") is None
+    assert entry_point_problem("pkg.mod:Outer.Inner") is None
     with pytest.raises(MethodError, match="Cannot import"):
         load_method("no_such_pkg.mod:X")
     with pytest.raises(MethodError, match="has no class 'Nope'.*NullMethod"):
@@ -91,3 +95,16 @@ def test_evaluate_reports_robustness_under_drift(tmp_path, tiny_scenario):
     assert robustness is not None and 0.0 < robustness < 2.0
     (folder,) = sdir.glob("fuelhm_baselines.paper_mahalanobis_PaperMahalanobis-*")
     assert (folder / "robustness.csv").exists()
+
+
+def test_a_malformed_method_entry_point_is_refused_before_any_data(tmp_path, capsys, monkeypatch):
+    """``--method nocolon`` is the caller's mistake: exit 2 naming the option, nothing built or written."""
+    from fuelhm_bench.cli import main
+
+    monkeypatch.setenv("FUELHM_BENCH_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "out"
+    assert main(["evaluate", "--method", "fuelhm_baselines.trivial:NullMethod", "--method", "a:B:C",
+                 "--scenario", "paper_2012", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--method must look like 'package.module:Class'" in err and "'a:B:C'" in err
+    assert not out.exists() and not (tmp_path / "cache").exists()

@@ -21,6 +21,8 @@ def test_shipped_leaderboard_file_loads():
     ("methods: []\nscenarios: [x]\n", "must both be non-empty"),
     ("methods: [{method: a:B, params: 3}]\nscenarios: [x]\n", r"methods\[0\].params must be a mapping"),
     ("methods: [a:B\n", "cannot read"),
+    ("methods: [nocolon]\nscenarios: [x]\n", r"methods\[0\] must look like 'package.module:Class' .* Got 'nocolon'"),
+    ("methods: [a:B, {method: 'pkg.mod:B:C'}]\nscenarios: [x]\n", r"methods\[1\].method must look like .* 'pkg.mod:B:C'"),
 ])
 def test_bad_leaderboard_files(tmp_path, text, match):
     path = tmp_path / "lb.yaml"

@@ -94,8 +94,14 @@ class LeaderboardConfig:
                 close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
                 raise ScenarioError(f"{path}: unknown key '{key}'. Allowed: {', '.join(sorted(allowed))}."
                                     + (f" Did you mean '{close[0]}'?" if close else ""))
+        from fuelhm_bench.methods.loading import entry_point_problem
+
         methods = []
         for i, m in enumerate(data.get("methods") or []):
+            spec = m if isinstance(m, str) else m.get("method") if isinstance(m, dict) else None
+            if isinstance(spec, str) and entry_point_problem(spec) is not None:
+                field = f"methods[{i}]" if isinstance(m, str) else f"methods[{i}].method"
+                raise ScenarioError(f"{path}: {field} {entry_point_problem(spec)}")
             if isinstance(m, str):
                 methods.append(LeaderboardEntry(m))
             elif isinstance(m, dict) and isinstance(m.get("method"), str):
@@ -388,7 +394,18 @@ def _prepare(prepare_evaluation, scenario, seed, fidelity, scale, kwargs, progre
 
 def evaluation_config(methods: list[str], scenario: str, *, seed=None, scale: float = 1.0, timeout_s: float = 600.0,
                       fidelity=None, limits: dict | None = None) -> LeaderboardConfig:
-    """The configuration of ``fuelhm-bench evaluate``: some methods on one scenario and seed."""
+    """The configuration of ``fuelhm-bench evaluate``: some methods on one scenario and seed.
+
+    Raises
+    ------
+    ParameterError
+        When a method's entry point is not of the form ``package.module:Class`` (before any data is built).
+    """
+    from fuelhm_bench.methods.loading import entry_point_problem
+
+    for m in methods:
+        if entry_point_problem(m) is not None:
+            raise ParameterError(f"--method {entry_point_problem(m)}")
     return LeaderboardConfig(tuple(LeaderboardEntry(m) for m in methods), (scenario,), (seed,), float(scale),
                              float(timeout_s), fidelity, tuple(sorted((limits or {}).items())))
 

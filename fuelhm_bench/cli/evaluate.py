@@ -43,9 +43,9 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.benchmark.loading import parse_params
 
     shared = parse_params(args.param)
-    out = check_results_dir(args.out, args.store, args.force)
     config = evaluation_config(args.method, args.scenario, seed=args.seed, scale=args.scale, timeout_s=args.timeout,
-                               fidelity=args.fidelity, limits=limits_from(args, {}))
+                               fidelity=args.fidelity, limits=limits_from(args, {}))  # bad options: nothing created
+    out = check_results_dir(args.out, args.store, args.force)
     board = run_board(config, out, store_path=args.store, shared_params=shared, rerun=args.rerun, jobs=args.jobs,
                       scheduler=args.scheduler, method_seed=args.method_seed, cache_dir=args.cache_dir,
                       flight_minutes=args.minutes, progress=progress_bar)

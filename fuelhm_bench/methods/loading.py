@@ -4,11 +4,29 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import sys
 
 from fuelhm_bench.errors import MethodError
 
-__all__ = ["load_method"]
+__all__ = ["entry_point_problem", "load_method"]
+
+_IDENTIFIER = r"[A-Za-z_][A-Za-z0-9_]*"
+_ENTRY_POINT = re.compile(rf"{_IDENTIFIER}(\.{_IDENTIFIER})*:{_IDENTIFIER}(\.{_IDENTIFIER})*")
+
+
+def entry_point_problem(spec) -> str | None:
+    """What is wrong with the form of a method's entry point, or None when it reads ``package.module:Class``.
+
+    Only the form is checked (dotted Python identifiers, one colon): whether the module imports
+    and the class builds is found out in the sealed process, as the method's own failure. A
+    malformed entry point is the caller's mistake, refused before any data is built.
+    """
+    if not isinstance(spec, str):
+        return f"must be a string 'package.module:Class'. Got {spec!r} ({type(spec).__name__}) instead."
+    if _ENTRY_POINT.fullmatch(spec) is None:
+        return f"must look like 'package.module:Class' (dotted Python names, one colon). Got {spec!r} instead."
+    return None
 
 
 def load_method(spec: str, params: dict | None = None):
@@ -25,16 +43,21 @@ def load_method(spec: str, params: dict | None = None):
     """
     from fuelhm_bench.methods.base import BaseMethod
 
-    module_name, sep, cls_name = str(spec).partition(":")
-    if not sep or not module_name or not cls_name:
-        raise MethodError(f"--method must look like 'package.module:Class'. Got '{spec}' instead.")
+    problem = entry_point_problem(spec)
+    if problem is not None:
+        raise MethodError(f"The method's entry point {problem}")
+    module_name, _, cls_name = spec.partition(":")
     if os.getcwd() not in sys.path:
         sys.path.insert(0, os.getcwd())
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
         raise MethodError(f"Cannot import the method module '{module_name}': {exc}.") from None
-    cls = getattr(module, cls_name, None)
+    cls = module
+    for part in cls_name.split("."):  # a nested class: Outer.Inner
+        cls = getattr(cls, part, None)
+        if cls is None:
+            break
     if cls is None:
         public = sorted(n for n, v in vars(module).items()
                         if isinstance(v, type) and issubclass(v, BaseMethod) and v is not BaseMethod)
