@@ -77,6 +77,18 @@ def test_logs_are_bounded_and_no_process_survives(evaluation, tmp_path):
     assert _gone(pid), f"process {pid} started by the method survived the run"
 
 
+def test_an_unwritable_log_still_drains_the_method_output(evaluation, tmp_path):
+    """The log file cannot be opened (its folder is missing): the method's megabytes of output are still drained.
+
+    Before, the log thread died opening the file (an exception in a thread) and the method blocked on a
+    full pipe until its wall-time limit.
+    """
+    outcome = run_in_env(Chatty(), evaluation, limits={"log_kb": 64.0, "wall_s": 30.0},
+                         log_path=tmp_path / "missing" / "chatty.log")
+    assert outcome.ok, outcome.message
+    assert not (tmp_path / "missing").exists()
+
+
 def _gone(pid: int) -> bool:
     """True when the process no longer exists or is a zombie (dead, waiting to be reaped by init)."""
     try:

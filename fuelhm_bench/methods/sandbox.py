@@ -281,7 +281,12 @@ class _LogPump(threading.Thread):
 
     def run(self) -> None:
         written = 0
-        sink = open(self.path, "wb") if self.path is not None else None
+        sink = None
+        if self.path is not None:
+            try:
+                sink = open(self.path, "wb")
+            except OSError:  # no log then, but the pipe is still drained: a full pipe would block the method
+                sink = None
         try:
             while True:
                 chunk = self.stream.read1(65536) if hasattr(self.stream, "read1") else self.stream.read(65536)
@@ -298,9 +303,10 @@ class _LogPump(threading.Thread):
             pass
         finally:
             if sink is not None:
-                if self.dropped:
-                    sink.write(f"\n[log cut at {self.limit} bytes; {self.dropped} more bytes dropped]\n".encode())
-                sink.close()
+                with contextlib.suppress(OSError):
+                    if self.dropped:
+                        sink.write(f"\n[log cut at {self.limit} bytes; {self.dropped} more bytes dropped]\n".encode())
+                    sink.close()
 
 
 def _raw_payload(flight: Any) -> dict:
