@@ -226,8 +226,16 @@ def test_cli_bad_inputs_give_clear_messages(overlap_file, tmp_path, capsys):
     broken.write_text("cylinder:\n  bore_m: -1\n")
     assert main(["discrepancy", str(path), "--model", str(broken), "--json"]) == 2
     captured = capsys.readouterr()
-    assert captured.out == ""
+    error = json.loads(captured.out)  # --json: exactly one object, also when the command fails
+    assert error["verdict"] is None and error["exit_status"] == 2 and "bore_m" in error["error"]
     assert "model.yaml" in captured.err and "bore_m" in captured.err
+    with pytest.raises(SystemExit) as exit_info:  # a command-line mistake (argparse) too
+        main(["discrepancy", str(path), "--jobs", "0", "--json"])
+    captured = capsys.readouterr()
+    assert exit_info.value.code == 2 and "--jobs" in captured.err
+    assert json.loads(captured.out) == {"verdict": None, "exit_status": 2,
+                                        "error": "fuelhm-bench discrepancy: error: argument --jobs: must be an "
+                                                 "integer >= 1, got 0"}
     assert main(["discrepancy", str(tmp_path / "nothing.parquet")]) == 2
     assert "nothing.parquet" in capsys.readouterr().err
     frame = pd.read_parquet(path).drop(columns=["current_mA"])

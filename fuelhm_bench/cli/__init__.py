@@ -113,7 +113,24 @@ def _run(argv: list[str] | None) -> int:
     from fuelhm_bench.cli._common import option_message
 
     parser = build_parser()
-    args = parser.parse_args(argv)
+    wants_json = "--json" in (sys.argv[1:] if argv is None else list(argv))
+    if wants_json:  # a command-line mistake must still give its one JSON object (the message also on stderr)
+        import contextlib
+        import io
+
+        captured = io.StringIO()
+        try:
+            with contextlib.redirect_stderr(captured):
+                args = parser.parse_args(argv)
+        except SystemExit as exc:
+            sys.stderr.write(captured.getvalue())
+            if exc.code not in (0, None):
+                lines = [ln for ln in captured.getvalue().splitlines() if ln.strip()]
+                _json_error(lines[-1] if lines else "invalid command line", int(exc.code))
+            raise
+        sys.stderr.write(captured.getvalue())
+    else:
+        args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 1
@@ -122,8 +139,18 @@ def _run(argv: list[str] | None) -> int:
     except FuelHMError as exc:
         if args.debug:
             raise
-        print(f"error: {option_message(str(exc), args)}", file=sys.stderr)
+        message = option_message(str(exc), args)
+        print(f"error: {message}", file=sys.stderr)
+        if getattr(args, "json", False):
+            _json_error(message, 2)
         return 2
+
+
+def _json_error(message: str, status: int) -> None:
+    """The one JSON object of a ``--json`` command that failed: ``{"error": ..., "exit_status": ...}`` on stdout."""
+    import json
+
+    print(json.dumps({"verdict": None, "error": message, "exit_status": status}))
 
 
 def console_main() -> None:  # pragma: no cover - the console script; tested through a subprocess
