@@ -16,7 +16,7 @@ from typing import Any, Callable
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.errors import DataFormatError, ParameterError
+from fuelhm_bench.errors import DataFormatError, ParameterError, show_value
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
 from fuelhm_bench.scoring.run import LABEL_COLUMNS
 from fuelhm_bench.taxonomy import MODE_IDS
@@ -283,7 +283,7 @@ def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise DataFormatError(f"{path}, {line(i)}: column 'split' must be 'test' or "
-                              f"'calibration'. Got {frame['split'].iloc[i]!r} instead.")
+                              f"'calibration'. Got {show_value(frame['split'].iloc[i])} instead.")
     for col in ("flight_index", "score"):
         values = pd.to_numeric(frame[col], errors="coerce")
         bad = ~np.isfinite(values.to_numpy(dtype=float))
@@ -293,14 +293,14 @@ def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
             i = int(np.flatnonzero(bad)[0])
             what = "an integer >= 0" if col == "flight_index" else "a finite number"
             raise DataFormatError(f"{path}, {line(i)}: column {col!r} must be {what}. Got "
-                                  f"{frame[col].iloc[i]!r} instead.")
+                                  f"{show_value(frame[col].iloc[i])} instead.")
         frame[col] = values.astype(np.int64 if col == "flight_index" else np.float64)
     alarm_text = frame["alarm"].astype(str).str.strip()
     bad = ~alarm_text.isin(_TRUE | _FALSE)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise DataFormatError(f"{path}, {line(i)}: column 'alarm' must be 0/1 or true/false. Got "
-                              f"{frame['alarm'].iloc[i]!r} instead.")
+                              f"{show_value(frame['alarm'].iloc[i])} instead.")
     frame["alarm"] = alarm_text.isin(_TRUE)
     for col in GUILT_COLUMNS:
         if col not in frame.columns:
@@ -312,7 +312,7 @@ def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise DataFormatError(f"{path}, {line(i)}: column {col!r} must be a number in [0, 1]. "
-                                  f"Got {frame[col].iloc[i]!r} instead.")
+                                  f"Got {show_value(frame[col].iloc[i])} instead.")
         frame[col] = values
     unit = frame["unit_id"]
     numeric = pd.to_numeric(unit, errors="coerce")

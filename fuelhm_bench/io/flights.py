@@ -127,7 +127,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.errors import DataFormatError, OutputPathError, range_error
+from fuelhm_bench.errors import DataFormatError, OutputPathError, range_error, show_value
 from fuelhm_bench.io.tables import (
     AtomicTableWriter,
     check_output_path,
@@ -359,8 +359,8 @@ class FlightRejection:
 
 
 def _show(value: Any) -> str:
-    """``repr`` of a value without numpy's type wrapper (``1.5``, not ``np.float64(1.5)``)."""
-    return repr(value.item() if isinstance(value, np.generic) else value)
+    """``repr`` of a value without numpy's type wrapper (``1.5``, not ``np.float64(1.5)``): :func:`show_value`."""
+    return show_value(value, limit=200)
 
 
 def _row_ref(row: int, first_line: int | None) -> str:

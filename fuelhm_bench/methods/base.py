@@ -19,7 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.errors import DataFormatError, MethodError, ParameterError
+from fuelhm_bench.errors import DataFormatError, MethodError, ParameterError, show_value
 from fuelhm_bench.methods.decision import GUILT_SUM_TOLERANCE, Decision, _raise_if_invalid
 from fuelhm_bench.methods.knowledge import Knowledge
 from fuelhm_bench.methods.params import validate_params
@@ -271,8 +271,8 @@ class BaseMethod(abc.ABC):
             dict(observation_row))
         if "unit_id" in row.index and row["unit_id"] != self._stream_unit:
             raise DataFormatError(f"The 'observation_row' parameter of {type(self).__name__}"
-                                  f".decide must belong to unit {self._stream_unit!r}. Got unit "
-                                  f"{row['unit_id']!r} instead.")
+                                  f".decide must belong to unit {show_value(self._stream_unit)}. Got unit "
+                                  f"{show_value(row['unit_id'])} instead.")
         if "flight_index" in row.index:
             k = int(row["flight_index"])
             if self._stream_last_index is not None and k <= self._stream_last_index:
@@ -287,7 +287,7 @@ class BaseMethod(abc.ABC):
             decision = self._decide(row, raw)
         else:
             decision = self._decide(row)
-        return _raise_if_invalid(decision, type(self).__name__, f"for unit {self._stream_unit!r}")
+        return _raise_if_invalid(decision, type(self).__name__, f"for unit {show_value(self._stream_unit)}")
 
     @abc.abstractmethod
     def _decide(self, row: pd.Series) -> Decision:
@@ -436,7 +436,7 @@ def run_unit(method: Any, unit_table: pd.DataFrame, *, raw: Any = None) -> pd.Da
         row = ordered.iloc[i]
         d = method.decide(row, raw=_raw_of(raw, row, name)) if with_raw else method.decide(row)
         d = _raise_if_invalid(d, name,
-                              f"for unit {unit_id!r}, flight {row['flight_index']}")
+                              f"for unit {show_value(unit_id)}, flight {row['flight_index']}")
         scores[i], alarms[i], guilt[i] = d.score, d.alarm, d.guilt
     out = {"unit_id": ordered["unit_id"].to_numpy(),
            "flight_index": ordered["flight_index"].to_numpy(dtype=np.int64),

@@ -25,7 +25,7 @@ from typing import Any, Callable, Iterator, Sequence
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.errors import MethodError
+from fuelhm_bench.errors import MethodError, show_value
 from fuelhm_bench.methods.base import (clone_method, has_batch_path, method_needs_raw, run_table,
                                        run_unit)
 from fuelhm_bench.methods.decision import decision_problem
@@ -303,10 +303,10 @@ def _first_difference(a: pd.DataFrame, b: pd.DataFrame, close: bool = False) -> 
         return f"{len(a)} decisions vs {len(b)}"
     for i in range(len(a)):
         ra, rb = a.iloc[i], b.iloc[i]
-        where = f"flight {ra['flight_index']} of unit {ra['unit_id']!r}"
+        where = f"flight {ra['flight_index']} of unit {show_value(ra['unit_id'])}"
         if ra["unit_id"] != rb["unit_id"] or ra["flight_index"] != rb["flight_index"]:
             return f"row {i} is {where} in one run and flight {rb['flight_index']} of unit " \
-                   f"{rb['unit_id']!r} in the other"
+                   f"{show_value(rb['unit_id'])} in the other"
         va = np.array([ra[c] for c in cols], dtype=float)
         vb = np.array([rb[c] for c in cols], dtype=float)
         same = (np.allclose(va, vb, rtol=_BATCH_RTOL, atol=1e-12, equal_nan=True)
@@ -408,10 +408,10 @@ def check_outputs_valid(method: Any, data: CheckData) -> None:
                 d = _decide(m, row, data)
             except Exception as exc:  # report where the method failed
                 raise _CheckFailure(f"decide raised {type(exc).__name__} at flight {k} of unit "
-                                    f"{unit_id!r}: {exc}") from exc
+                                    f"{show_value(unit_id)}: {exc}") from exc
             problem = decision_problem(d)
             if problem is not None:
-                raise _CheckFailure(f"decision at flight {k} of unit {unit_id!r} is invalid: "
+                raise _CheckFailure(f"decision at flight {k} of unit {show_value(unit_id)} is invalid: "
                                     f"{problem}")
         out = m.decide_unit(table, **_raw_arg(method, data))
         if not isinstance(out, pd.DataFrame) or list(out.columns) != list(DECISION_COLUMNS):
@@ -421,10 +421,10 @@ def check_outputs_valid(method: Any, data: CheckData) -> None:
         if len(out) != len(table) or not np.array_equal(
                 out["flight_index"].to_numpy(), np.sort(table["flight_index"].to_numpy())):
             raise _CheckFailure(f"decide_unit must return one row per flight in flight order for "
-                                f"unit {unit_id!r}")
+                                f"unit {show_value(unit_id)}")
         if out["alarm"].dtype != bool or not np.all(np.isfinite(out["score"].to_numpy(float))):
             raise _CheckFailure(f"decide_unit returned a non-bool alarm column or a non-finite "
-                                f"score for unit {unit_id!r}")
+                                f"score for unit {show_value(unit_id)}")
 
 
 def check_seeded_determinism(method: Any, data: CheckData) -> None:
@@ -469,7 +469,7 @@ def check_no_lookahead(method: Any, data: CheckData) -> None:
                                              close=has_batch_path(method))
                     if diff is not None:
                         raise _CheckFailure(f"decision at flight {table['flight_index'][i]} of "
-                                            f"unit {unit_id!r} changed when {what}")
+                                            f"unit {show_value(unit_id)} changed when {what}")
 
 
 def _changed_raw(data: CheckData, unit_id: Any, last: int) -> Callable[[Any], Any]:
@@ -526,7 +526,7 @@ def check_inputs_not_mutated(method: Any, data: CheckData) -> None:
         m.decide_unit(table, **_raw_arg(method, data))
         change = _frame_change(snapshot, table)
         if change is not None:
-            raise _CheckFailure(f"decide_unit modified 'unit_table' of unit {unit_id!r}: {change}")
+            raise _CheckFailure(f"decide_unit modified 'unit_table' of unit {show_value(unit_id)}: {change}")
         m.start_unit(unit_id)
         ordered = table.sort_values("flight_index")
         # a batch method's rows are decided on their own: one unit shows a mutation as well as all
@@ -536,7 +536,7 @@ def check_inputs_not_mutated(method: Any, data: CheckData) -> None:
             _decide(m, row, data)
             if not row.equals(row_before) or list(row.index) != list(row_before.index):
                 raise _CheckFailure(f"decide modified its observation row (flight "
-                                    f"{row_before['flight_index']} of unit {unit_id!r})")
+                                    f"{row_before['flight_index']} of unit {show_value(unit_id)})")
 
 
 def check_refit_idempotent(method: Any, data: CheckData) -> None:

@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from fuelhm_bench.errors import ParameterError
+from fuelhm_bench.errors import ParameterError, show_value
 
 __all__ = ["Limits", "SealedFailure", "SealedMethod", "locate_module", "source_hash"]
 
@@ -655,7 +655,7 @@ class SealedMethod:
 
     def start_unit(self, unit_id) -> None:
         """``method.start_unit`` in the sealed process."""
-        self._call("start_unit", {"unit_id": unit_id}, phase=f"start_unit({unit_id!r})")
+        self._call("start_unit", {"unit_id": unit_id}, phase=f"start_unit({show_value(unit_id)})")
 
     def decide(self, row, *, raw=None, where: str = "decide"):
         """``method.decide(row)``; returns a validated :class:`~fuelhm_bench.methods.Decision`.

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.errors import DataFormatError
+from fuelhm_bench.errors import DataFormatError, show_value
 from fuelhm_bench.methods.decision import GUILT_SUM_TOLERANCE
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
 from fuelhm_bench.scoring.config import ScoringConfig
@@ -104,12 +104,12 @@ def _missing(table: pd.DataFrame, required: tuple[str, ...], what: str) -> None:
         row = table.loc[dup, _KEYS].iloc[0]
         raise DataFormatError(f"The '{what}' parameter of Run must have one row per (unit_id, "
                               f"flight_index). Got flight {row['flight_index']} of unit "
-                              f"{row['unit_id']!r} twice instead.")
+                              f"{show_value(row['unit_id'])} twice instead.")
 
 
 def _first_bad(table: pd.DataFrame, mask: np.ndarray) -> str:
     row = table.loc[mask, _KEYS].iloc[0]
-    return f"flight {row['flight_index']} of unit {row['unit_id']!r}"
+    return f"flight {row['flight_index']} of unit {show_value(row['unit_id'])}"
 
 
 def _check_labels(labels: pd.DataFrame) -> None:
@@ -168,7 +168,7 @@ def _check_same_keys(labels: pd.DataFrame, decisions: pd.DataFrame) -> None:
             raise DataFormatError(f"The 'decisions' and 'labels' parameters of Run must cover the "
                                   f"same flights. Got {len(extra)} flight(s) missing from "
                                   f"{other}, e.g. flight {row['flight_index']} of unit "
-                                  f"{row['unit_id']!r}.")
+                                  f"{show_value(row['unit_id'])}.")
 
 
 def _reference_max(labels: pd.DataFrame, config: ScoringConfig) -> np.ndarray:
