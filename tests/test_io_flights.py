@@ -379,6 +379,17 @@ def test_decreasing_time_rejected():
     assert rejection.flight_id == 7 and rejection.unit_id == "U"
     assert "time_s decreases from 0.2 s to 0.1 s at sample 2" in rejection.reason
     assert str(rejection).startswith("test.csv: flight 7 (unit 'U') rejected: time_s decreases")
+    assert rejection.reason.endswith("If the rows are only out of order, sort each flight's samples by time_s.")
+
+
+def test_decreasing_time_by_jitter_says_so():
+    """Backward steps all under half the typical step read as timestamp jitter, and the message says how to fix it."""
+    time = np.arange(40) * 0.01
+    time[[10, 25]] += 0.012  # 12 ms late at 10 ms: the next step goes back 2 ms, twice
+    reason = only_rejection(minimal(time_s=tuple(time), current=np.sin(time), position=np.cos(time))).reason
+    assert "2 decrease(s) in all" in reason
+    assert reason.endswith("Every decrease is under half the typical step (0.002 s at most, against 0.01 s): timestamp "
+                           "jitter; give each sample its frame time (rounded to the recording's frame period).")
 
 
 def test_nan_or_infinite_time_rejected():

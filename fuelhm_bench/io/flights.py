@@ -1169,14 +1169,26 @@ def _time_problem(time_s: np.ndarray) -> str | None:
                 f"time_s is {what} at {int(bad.sum())} sample(s), first at sample {first} of "
                 "the flight (0-based, file order); every sample needs a finite time."
             )
-    decreases = np.flatnonzero(np.diff(time_s) < 0)
+    steps = np.diff(time_s)
+    decreases = np.flatnonzero(steps < 0)
     if decreases.size:
         k = int(decreases[0]) + 1
-        return (
+        reason = (
             f"time_s decreases from {_seconds(time_s[k - 1])} to {_seconds(time_s[k])} at "
             f"sample {k} of the flight (0-based, file order; {decreases.size} decrease(s) in "
             "all); the samples of a flight must be in increasing time order."
         )
+        forward = steps[steps > 0]
+        if forward.size:  # say what the decreases look like
+            typical = float(np.median(forward))
+            largest = float(-steps[decreases].min())
+            if largest < 0.5 * typical:
+                reason += (f" Every decrease is under half the typical step ({largest:.3g} s at most, against "
+                           f"{typical:.3g} s): timestamp jitter; give each sample its frame time (rounded to "
+                           f"the recording's frame period).")
+            else:
+                reason += " If the rows are only out of order, sort each flight's samples by time_s."
+        return reason
     return None
 
 
