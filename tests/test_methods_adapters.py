@@ -188,6 +188,31 @@ def test_readme_pipeline_recipe(tmp_path, monkeypatch):
     assert type(forest.detector_).__name__ == "IsolationForest"
 
 
+def test_readme_pipeline_recipe_through_the_cli(tmp_path, monkeypatch, tiny_scenario, capsys):
+    """The README's two steps as a user runs them: my_ocsvm.py in the working directory, then its evaluate line.
+
+    The output folder is inside the working directory, as in the README. Before the sandbox granted the
+    directory around it, the sealed process could not import ``my_ocsvm`` (the recipe test above loads the
+    class in this process, so it did not see that).
+    """
+    from fuelhm_bench.cli import main
+
+    code = re.search(r"```python\n(.*?)```", _readme_section(), re.S).group(1)
+    line = re.search(r"Then `(fuelhm-bench evaluate [^`]+)`", _readme_section()).group(1)
+    (tmp_path / "scenario").mkdir()
+    scenario = tiny_scenario(tmp_path / "scenario")
+    project = tmp_path / "project"
+    project.mkdir()
+    (project / "my_ocsvm.py").write_text(code)
+    monkeypatch.chdir(project)
+    argv = line.split()[1:]
+    argv[argv.index("--scenario") + 1] = str(scenario)
+    assert argv[argv.index("--out") + 1] == "results/"
+    assert main(argv) == 0, capsys.readouterr().err[-2000:]
+    board = pd.read_csv(project / "results" / "leaderboard.csv")
+    assert board["status"].tolist() == ["ok"] and board["method"].tolist() == ["my_ocsvm:ScaledOCSVM"]
+
+
 def _score_in_process(method):
     """Fit on the check data's healthy flights, decide on its drifting units, score against their labels."""
     from fuelhm_bench.methods import run_table
