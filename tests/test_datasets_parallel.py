@@ -87,6 +87,23 @@ def test_ctrl_c_ends_the_workers_and_the_next_call_starts_afresh():
     assert run_ordered(_square_plus, [(k, 0) for k in range(3)], workers=2) == [0, 1, 4]
 
 
+def test_ctrl_c_leaves_no_exception_in_the_pool_thread(monkeypatch):
+    """After Ctrl-C the pool's own thread ends cleanly (it raised InvalidStateError on futures cancelled meanwhile)."""
+    import threading
+
+    def interrupt(_n: int) -> None:
+        raise KeyboardInterrupt
+
+    failures = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: failures.append(repr(args.exc_value)))
+    for _ in range(5):
+        run_ordered(_square_plus, [(1, 0), (2, 0)], workers=2)
+        with pytest.raises(KeyboardInterrupt):
+            run_ordered(_square_plus, [(k, 0) for k in range(12)], workers=2, progress=interrupt)
+        time.sleep(0.3)  # the pool's thread settles its futures
+    assert failures == []
+
+
 def test_allocator_is_tuned_once_per_process():
     """On glibc the heap keeps freed flight-sized arrays (fewer page faults); the call is idempotent and harmless."""
     import platform

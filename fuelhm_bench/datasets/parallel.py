@@ -216,10 +216,14 @@ def run_ordered(fn: Callable, tasks: Sequence[tuple], *, workers: int = 1, sizes
                 if progress is not None:
                     progress(sizes[i])
     except BaseException as exc:
-        for f in pending:
-            f.cancel()
         if isinstance(exc, BrokenProcessPool) or not isinstance(exc, Exception):
-            _terminate(workers)  # a worker died, or Ctrl-C: stop now; the next call starts a new pool
+            # A worker died, or Ctrl-C: stop now; the next call starts a new pool. The pool settles its
+            # pending futures itself: one cancelled here as well made the pool's own thread fail
+            # (InvalidStateError: it marks every pending future broken, Python 3.11).
+            _terminate(workers)
+        else:
+            for f in pending:
+                f.cancel()
         raise
     return results
 
