@@ -99,9 +99,9 @@ class LeaderboardConfig:
         methods = []
         for i, m in enumerate(data.get("methods") or []):
             spec = m if isinstance(m, str) else m.get("method") if isinstance(m, dict) else None
-            if isinstance(spec, str) and entry_point_problem(spec) is not None:
+            if isinstance(spec, str) and (problem := entry_point_problem(spec)) is not None:
                 field = f"methods[{i}]" if isinstance(m, str) else f"methods[{i}].method"
-                raise ScenarioError(f"{path}: {field} {entry_point_problem(spec)}")
+                raise ScenarioError(f"{path}: {field} {problem}")
             if isinstance(m, str):
                 methods.append(LeaderboardEntry(m))
             elif isinstance(m, dict) and isinstance(m.get("method"), str):
@@ -404,8 +404,8 @@ def evaluation_config(methods: list[str], scenario: str, *, seed=None, scale: fl
     from fuelhm_bench.methods.loading import entry_point_problem
 
     for m in methods:
-        if entry_point_problem(m) is not None:
-            raise ParameterError(f"--method {entry_point_problem(m)}")
+        if (problem := entry_point_problem(m)) is not None:
+            raise ParameterError(f"--method {problem}")
     return LeaderboardConfig(tuple(LeaderboardEntry(m) for m in methods), (scenario,), (seed,), float(scale),
                              float(timeout_s), fidelity, tuple(sorted((limits or {}).items())))
 

@@ -122,7 +122,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -646,30 +646,49 @@ def check_plausibility(table: pd.DataFrame, *, source: str = "<table>") -> None:
                     f"Column '{column}' of '{source}' ranges over only {_range_text(values)} {unit} (every "
                     f"value within +-{limit:g} {unit}): implausibly small for the {_QUANTITY[column]}. It looks "
                     f"like {likely}.")
-    _check_sampling(table, source)
-    _check_sign_convention(table, source)
+    steps = _flight_steps(table)
+    _check_sampling(table, steps, source)
+    _check_sign_convention(table, steps, source)
 
 
-def _check_sign_convention(table: pd.DataFrame, source: str) -> None:
+class _FlightSteps(NamedTuple):
+    """The steps between consecutive samples of each flight, shared by rules F8 and F9.
+
+    ``codes``: each row's flight (0, 1, ... in order of first appearance); ``dt``: each row's time
+    step from the previous sample of its flight [s] (NaN on a flight's first row); ``ordered``:
+    whether the row's flight never steps back in time (a flight out of order says nothing to either
+    rule; P4 rejects it with its own reason).
+    """
+
+    codes: np.ndarray
+    dt: np.ndarray
+    ordered: np.ndarray
+
+
+def _flight_steps(table: pd.DataFrame) -> _FlightSteps:
+    codes = pd.factorize(table["flight_id"], sort=False)[0]
+    dt = table.groupby(codes, sort=False)["time_s"].diff().to_numpy()
+    backwards = np.zeros(codes.max() + 1 if codes.size else 0, dtype=bool)
+    np.logical_or.at(backwards, codes[dt < 0], True)
+    return _FlightSteps(codes, dt, ~backwards[codes])
+
+
+def _check_sign_convention(table: pd.DataFrame, steps: _FlightSteps, source: str) -> None:
     """Rule F9: positive current extends the rod, so current and rod velocity correlate positively.
 
     Per flight (in time order, with at least :data:`_SIGN_MIN_STEPS` finite steps), the Pearson
     correlation of the rod velocity ``d(position_mm)/dt`` with the current at mid-step; the file is
     refused when the median over those flights is below :data:`_SIGN_MIN_CORRELATION`.
     """
-    codes = pd.factorize(table["flight_id"], sort=False)[0]
+    codes, dt = steps.codes, steps.dt
     grouped = table.groupby(codes, sort=False)
-    dt = grouped["time_s"].diff().to_numpy()
     dx = grouped["position_mm"].diff().to_numpy()
-    current = table["current_mA"].to_numpy()
-    mid = 0.5 * (current + grouped["current_mA"].shift().to_numpy())
-    backwards = np.zeros(codes.max() + 1 if codes.size else 0, dtype=bool)
-    np.logical_or.at(backwards, codes[dt < 0], True)
-    ok = np.isfinite(dt) & (dt > 0) & np.isfinite(dx) & np.isfinite(mid) & ~backwards[codes]
+    mid = 0.5 * (table["current_mA"].to_numpy() + grouped["current_mA"].shift().to_numpy())
+    ok = np.isfinite(dt) & (dt > 0) & np.isfinite(dx) & np.isfinite(mid) & steps.ordered
     if not ok.any():
         return
     g, v, i = codes[ok], dx[ok] / dt[ok], mid[ok]
-    n_groups = backwards.size
+    n_groups = int(codes.max()) + 1
 
     def total(values: np.ndarray) -> np.ndarray:
         return np.bincount(g, weights=values, minlength=n_groups)
@@ -695,17 +714,14 @@ def _check_sign_convention(table: pd.DataFrame, source: str) -> None:
         f"the retracted end (stroke - position).")
 
 
-def _check_sampling(table: pd.DataFrame, source: str) -> None:
+def _check_sampling(table: pd.DataFrame, flight_steps: _FlightSteps, source: str) -> None:
     """Rule F8: the median interval between consecutive samples of a flight.
 
     Only flights whose ``time_s`` never decreases count: the steps of a flight out of time order
-    (rows shuffled, a clock reset) say nothing about the unit of the column, and rule P4
-    rejects such a flight with its own reason.
+    (rows shuffled, a clock reset) say nothing about the unit of the column.
     """
-    steps = table.groupby("flight_id", sort=False)["time_s"].diff()
-    backwards = steps.lt(0).groupby(table["flight_id"], sort=False).transform("any").to_numpy(dtype=bool)
-    steps = steps.to_numpy()
-    steps = steps[np.isfinite(steps) & (steps > 0) & ~backwards]
+    steps = flight_steps.dt
+    steps = steps[np.isfinite(steps) & (steps > 0) & flight_steps.ordered]
     if steps.size == 0:
         return
     median = float(np.median(steps))
