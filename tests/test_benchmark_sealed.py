@@ -197,3 +197,47 @@ def test_readable_around_a_denied_folder(tmp_path):
     assert len(set(readable)) == len(readable)
     assert listable == [str(root), str(root / "sub")]
     assert _readable_around([str(root)], []) == ([str(root)], [])
+
+
+def test_a_cache_given_by_path_is_hidden_too(cache_dir, tmp_path, monkeypatch):
+    """A simulation cache passed as ``cache_dir`` (here inside the working directory, which sealed methods
+    may read) is hidden like the default one. Before, only the default cache was denied, so a project-local
+    ``--cache-dir .cache`` was open to the method (the scored fleet's future flights)."""
+    import shutil
+
+    project = tmp_path / "project"
+    project.mkdir()
+    local = project / "cache"
+    shutil.copytree(cache_dir, local)  # the module's products: loaded, not rebuilt
+    (local / "labels.csv").write_text("flight_id,onset_internal_leakage\n0,3\n")
+    monkeypatch.chdir(project)
+    monkeypatch.setenv("FUELHM_BENCH_CACHE", str(tmp_path / "elsewhere"))  # the default cache is another folder
+    ev = prepare_evaluation(tiny(), fidelity="surrogate", knowledge_size=KnowledgeSize.small(), cache_dir=local)
+    assert ev.cache_dir == local
+    log = tmp_path / "spy.log"
+    outcome = run_in_env(Spy(dirs=(str(local), str(project))), ev, log_path=log, timeout_s=120)
+    assert outcome.ok, outcome.message
+    if outcome.sandbox.startswith("no file-system restriction"):
+        pytest.skip(f"the file system is not sealed here: {outcome.sandbox}")
+    found = log.read_text()
+    assert "SPY FOUND: []" in found, found[-2000:]
+
+
+def test_a_method_module_inside_a_hidden_folder_is_refused_first(tmp_path, monkeypatch):
+    """``--out .`` with the method's module in the working directory: the output folder is hidden from sealed
+    methods, so the module could not be imported there. The run is refused before any data is built, naming
+    the module, the folder and the option (before: every scenario's data were built, then "No module named")."""
+    from fuelhm_bench.benchmark.leaderboard import evaluation_config, run_board
+
+    (tmp_path / "mine.py").write_text("from fuelhm_baselines.trivial import NullMethod as Mine\n")
+    monkeypatch.chdir(tmp_path)
+    config = evaluation_config(["mine:Mine"], "paper_2012", scale=0.1, fidelity="surrogate")
+    lines = []
+    with pytest.raises(ParameterError) as info:
+        run_board(config, tmp_path, log=lines.append)
+    message = str(info.value)
+    assert "mine:Mine" in message and str(tmp_path / "mine.py") in message and "--out" in message
+    assert not (tmp_path / "results.sqlite").exists() and lines == []
+    with pytest.raises(ParameterError, match="--cache-dir"):  # the same for a cache holding the module
+        run_board(config, tmp_path / "results", cache_dir=tmp_path, log=lines.append)
+    assert not (tmp_path / "results").exists()

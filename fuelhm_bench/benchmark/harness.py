@@ -159,6 +159,9 @@ class EnvEvaluation:
     nominal : EnvEvaluation or None, default=None
         For a scenario with nominal-parameter drift: the same scored fleet
         without the drift (``drifted=False``), to measure robustness.
+    cache_dir : path-like, False or None, default=None
+        The disk cache the products were built in or read from (None: the
+        default cache; False: memory only); sealed methods cannot read it.
     """
 
     scenario: Any
@@ -169,6 +172,7 @@ class EnvEvaluation:
     calibration_indicators: pd.DataFrame
     env: Any
     nominal: EnvEvaluation | None = None
+    cache_dir: Any = None
 
     @property
     def n_flights(self) -> int:
@@ -294,7 +298,7 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
             env.load_replays(scored_indicators(sc, units=n_units, drifted=drifted, **common))
         env.reset(options={"unit": 0})  # builds the scored fleet once, up front
         return EnvEvaluation(scored, env.fidelity, tuple(range(n_units)), knowledge, fit_part, cal_part, env,
-                             nominal)
+                             nominal, cache_dir)
 
     nominal = make(False, None) if robustness and sc.drift else None
     return make(True, nominal)
@@ -573,7 +577,8 @@ def run_in_env(method, evaluation: EnvEvaluation, *, random_state: int = 0, time
     name = method if isinstance(method, str) else type(method).__name__
     meta = {"scenario": evaluation.scenario.id, "fidelity": evaluation.fidelity,
             "costs": evaluation.scenario.costs}
-    hidden = [default_cache_dir(), *deny]
+    hidden = [default_cache_dir(), *([evaluation.cache_dir] if evaluation.cache_dir not in (None, False) else []),
+              *deny]
     sealed = SealedMethod(method, params=params, shared_params=shared_params, limits=limits, log_path=log_path,
                           deny=hidden)
     t0 = time.perf_counter()

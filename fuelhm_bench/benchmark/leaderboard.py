@@ -278,6 +278,32 @@ def statistics(card, *, seed: int = 0, n_resamples: int = 1000) -> dict:
 
 
 # --------------------------------------------------------------------------- the run
+def _check_modules_visible(config: LeaderboardConfig, hidden: dict) -> None:
+    """Refuse, before any data is built, a method whose module lies in a folder sealed methods cannot read.
+
+    ``hidden`` maps a description of each folder (naming its option) to its resolved path. The
+    results and the simulation cache are hidden from sealed methods (docs/methods.md, section 7),
+    so a module saved inside one of them cannot be imported there: ``--out .`` with the method's
+    module in the working directory is the usual way to get here.
+    """
+    from fuelhm_bench.datasets.cache import default_cache_dir
+    from fuelhm_bench.methods.sandbox import locate_module
+
+    folders = {"the default simulation cache": Path(default_cache_dir()).resolve(), **hidden}
+    for entry in dict.fromkeys(e.method for e in config.methods):
+        origin = locate_module(entry.partition(":")[0])
+        if origin is None:
+            continue  # not found here: the sealed process reports it as the method's own failure
+        origin = origin.resolve()
+        for what, folder in folders.items():
+            if origin == folder or folder in origin.parents:
+                raise ParameterError(
+                    f"The method '{entry}' is imported from {origin}, inside {what} {folder}, which sealed "
+                    f"methods cannot read (it holds results or simulated ground truth). Keep the method's "
+                    f"module out of that folder: for example write the results to a sub-folder "
+                    f"(--out results/).")
+
+
 def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params: dict | None = None,
               rerun: bool = False, jobs: int = 1, scheduler: str | None = None, method_seed: int = 0,
               cache_dir=None, flight_minutes=None, progress=None,
@@ -315,7 +341,13 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
     out = Path(out)
     tasks = plan_tasks(config, shared_params)
     limits = {**dict(config.limits), "wall_s": config.timeout_s}
-    store = ResultStore(store_path or default_store_path(out))
+    store_path = Path(store_path or default_store_path(out))
+    hidden = {"the output folder (--out)": out.resolve(),
+              "the folder of the results store (--store)": store_path.resolve().parent}
+    if cache_dir not in (None, False):
+        hidden["the simulation cache (--cache-dir)"] = Path(cache_dir).resolve()
+    _check_modules_visible(config, hidden)
+    store = ResultStore(store_path)
     try:
         stored = store.keys()
         todo = [t for t in tasks if rerun or t.key not in stored]
@@ -324,7 +356,7 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
                 f"{len(todo)} to run" + ("" if not todo else "."))
         kwargs = {"limits": limits, "method_seed": method_seed, "cache_dir": cache_dir,
                   "flight_minutes": flight_minutes, "log_dir": str(out / "logs"),
-                  "deny": [str(out.resolve()), str(store.path.resolve().parent)]}
+                  "deny": [str(p) for p in hidden.values()]}
 
         def done(record: dict, tables: dict) -> None:
             store.put(record, tables)
