@@ -250,3 +250,22 @@ def test_sealed_checker_names_methods_that_hang_exit_or_die():
         with pytest.raises(MethodError, match=match):
             check_method(method, timeout_s=5.0)
     check_method(NullMethod(), timeout_s=60.0)  # and a correct method passes sealed
+
+
+def test_sealed_checks_pass_a_class_defined_in_a_script_or_notebook():
+    """A class from a notebook cell or a script (a module the sealed process cannot import) reaches the
+    sealed checks by value. Before, check_pickle_roundtrip failed it there ("Can't pickle <class
+    '__main__.ZScoreMethod'>: attribute lookup failed") although it pickles in the user's own process
+    and evaluates fine: the docs' own example, run as a script, did not pass check_method."""
+    import inspect
+    import textwrap
+    import types
+
+    import test_methods_base
+
+    cell = types.ModuleType("__main__")  # a script's or notebook's classes live in __main__ (here: not the real one)
+    source = "import numpy as np\nfrom fuelhm_bench.methods import BaseMethod, Decision, normalize_guilt\n" \
+             "from fuelhm_bench.taxonomy import INDICATOR_NAMES\nfrom fuelhm_bench.methods.params import " \
+             "Interval, RandomState\n" + textwrap.dedent(inspect.getsource(test_methods_base.ZScore))
+    exec(compile(source, "<notebook cell>", "exec"), cell.__dict__)
+    check_method(cell.ZScore(a=2.0), timeout_s=120.0)

@@ -19,6 +19,7 @@ import contextlib
 import copy
 import inspect
 import pickle
+import sys
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterator, Sequence
 
@@ -592,11 +593,29 @@ def check_clone(method: Any, data: CheckData) -> None:
         raise _CheckFailure(f"a clone fitted with the same seed gave different decisions: {diff}")
 
 
+def _dumps(m: Any) -> bytes:
+    """``pickle.dumps(m)``, or by value when its class cannot be found by name in this process.
+
+    A class defined in a script or a notebook (module ``__main__``) reaches the sealed process by
+    value (cloudpickle); there ``pickle`` cannot look it up by name, although it can in the user's
+    own process. Pickling it by value there checks what the user's process would do.
+    """
+    cls = type(m)
+    owner = sys.modules.get(cls.__module__)
+    for part in cls.__qualname__.split("."):
+        owner = getattr(owner, part, None)
+    if owner is cls or "<locals>" in cls.__qualname__:
+        return pickle.dumps(m)
+    import cloudpickle
+
+    return cloudpickle.dumps(m)
+
+
 def check_pickle_roundtrip(method: Any, data: CheckData) -> None:
     """A fitted method survives pickle.dumps/loads and then decides identically."""
     m = _fresh(method, data)
     try:
-        blob = pickle.dumps(m)
+        blob = _dumps(m)
         restored = pickle.loads(blob)
     except Exception as exc:
         raise _CheckFailure(f"pickling the fitted method raised {type(exc).__name__}: "
