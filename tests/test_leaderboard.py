@@ -49,3 +49,42 @@ def test_tiny_leaderboard_ranks_methods(tmp_path, tiny_scenario):
     assert (ok["summary_score_ci_low"] <= ok["summary_score"]).all() and "brier" in board
     page = (out / "index.html").read_text()
     assert "Cannot import the method module" in page and "summary_score" in page and 'id="cd-diagram"' in page
+
+
+def test_store_keys_follow_every_file_of_the_method(tmp_path, monkeypatch):
+    """The key of an evaluation changes when any file the method ships with changes: a sibling module
+    of its package, a thresholds file beside a single-file module. Before, only the entry module was
+    hashed, so a resumed leaderboard reused a stale result after such an edit (reported: 43.1 reused,
+    28.6 for the edited code). Bytecode caches and hidden files do not count."""
+    import sys
+
+    from fuelhm_bench.benchmark.leaderboard import LeaderboardEntry, plan_tasks
+
+    pkg = tmp_path / "mypkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("from .detector import Det\n")
+    (pkg / "detector.py").write_text("from fuelhm_baselines.trivial import NullMethod as Det\n")
+    (pkg / "features.py").write_text("SCALE = 1.4826\n")
+    (tmp_path / "single.py").write_text("from fuelhm_baselines.trivial import NullMethod as One\n")
+    (tmp_path / "single_thresholds.json").write_text('{"a": 3.0}')
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    config = LeaderboardConfig((LeaderboardEntry("mypkg:Det"), LeaderboardEntry("single:One")), ("paper_2012",))
+
+    def keys():
+        return [t.key for t in plan_tasks(config)]
+
+    first = keys()
+    assert keys() == first  # stable
+    (pkg / "__pycache__").mkdir()
+    (pkg / "__pycache__" / "features.cpython-311.pyc").write_bytes(b"\0" * 16)
+    (tmp_path / ".hidden").write_text("editor state")
+    assert keys() == first
+    (pkg / "features.py").write_text("SCALE = 3.0\n")
+    second = keys()
+    assert second[0] != first[0] and second[1] == first[1]
+    (tmp_path / "single_thresholds.json").write_text('{"a": 2.0}')
+    third = keys()
+    assert third[0] == second[0] and third[1] != second[1]
+    assert all(t.source_hash for t in plan_tasks(config))
+    sys.modules.pop("mypkg", None)

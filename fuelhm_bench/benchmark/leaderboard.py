@@ -154,6 +154,7 @@ class Task:
     seed: int
     fidelity: str | None
     scale: float
+    source_hash: str = ""
 
     @property
     def params_dict(self) -> dict:
@@ -190,7 +191,8 @@ def plan_tasks(config: LeaderboardConfig, shared_params: dict | None = None) -> 
                 params = {**dict(m.params), **({"shared": dict(shared)} if shared else {})}
                 key = evaluation_key(method=m.method, params=params, source_hash=hashes[m.method], scenario=sc.id,
                                      seed=s, fidelity=fidelity, scale=config.scale, package_version=__version__)
-                tasks.append(Task(key, m.method, m.params, shared, scenario, sc.id, s, fidelity, config.scale))
+                tasks.append(Task(key, m.method, m.params, shared, scenario, sc.id, s, fidelity, config.scale,
+                                  hashes[m.method]))
     return tasks
 
 
@@ -247,15 +249,12 @@ def evaluate_task(task: Task, *, limits: dict, method_seed: int = 0, cache_dir=N
             status, message, tables = "invalid", f"{task.method}: its output cannot be scored: {exc}", {}
     record = {"key": task.key, "method": task.method,
               "params": {**task.params_dict, **({"shared": dict(task.shared_params)} if task.shared_params else {})},
-              "source_hash": "", "scenario": task.scenario_id, "seed": task.seed, "fidelity": evaluation.fidelity,
+              "source_hash": task.source_hash, "scenario": task.scenario_id, "seed": task.seed, "fidelity": evaluation.fidelity,
               "scale": task.scale, "status": status, "message": message.splitlines()[0] if message else "",
               "kpis": kpis, "method_params": outcome.params, "fit_seconds": outcome.fit_seconds,
               "decide_seconds": outcome.decide_seconds, "seconds": outcome.seconds,
               "provenance": {**provenance(), "sandbox": outcome.sandbox}}
     record["package_version"] = record["provenance"]["package_version"]
-    from fuelhm_bench.methods.sandbox import source_hash
-
-    record["source_hash"] = source_hash(task.method)
     return record, tables
 
 

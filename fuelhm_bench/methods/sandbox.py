@@ -170,14 +170,49 @@ def _package_root(name: str) -> Path | None:
     return origin.parent if origin.name == "__init__.py" else origin
 
 
+_HASH_READ_BYTES = 256 * 1024 * 1024  # beyond this many bytes read, further files count by (size, mtime)
+
+
 def source_hash(entry_point: str) -> str:
-    """SHA-256 of the source file of the module of ``module:Class`` ('' when it cannot be found)."""
+    """SHA-256 of the code of ``module:Class`` and the files shipped with it ('' when it cannot be found).
+
+    What a method's results depend on is rarely one file: a package's other modules, a base class in
+    a sibling module, a weights or thresholds file read through ``__file__``. So the hash covers,
+    for a module inside a package, every file beneath its top-level package directory; for a
+    top-level single-file module, every file of its directory (not the sub-directories). Bytecode
+    caches and hidden entries (``.git``, ``.venv``...) are skipped; files beyond the first 256 MiB
+    read count by size and modification time. A result store keys evaluations on it, so editing any
+    of these files makes a resumed run evaluate the method again.
+    """
     import hashlib
 
-    origin = locate_module(entry_point.partition(":")[0])
+    name = entry_point.partition(":")[0]
+    origin = locate_module(name.split(".")[0])
     if origin is None or not origin.is_file():
         return ""
-    return hashlib.sha256(origin.read_bytes()).hexdigest()
+    if origin.name == "__init__.py":
+        root = origin.parent
+        files = [p for p in root.rglob("*") if not any(part.startswith(".") or part == "__pycache__"
+                                                       for part in p.relative_to(root).parts)]
+    else:
+        root = origin.parent
+        files = [p for p in root.iterdir() if not p.name.startswith(".")]
+    digest = hashlib.sha256()
+    budget = _HASH_READ_BYTES
+    for path in sorted(files, key=lambda p: p.relative_to(root).as_posix()):
+        try:
+            if not path.is_file() or path.suffix == ".pyc":
+                continue
+            stat = path.stat()
+            digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+            if stat.st_size <= budget:
+                budget -= stat.st_size
+                digest.update(hashlib.sha256(path.read_bytes()).digest())
+            else:
+                digest.update(f"{stat.st_size}:{stat.st_mtime_ns}".encode())
+        except OSError:
+            continue  # unreadable or gone: not part of what the method can load either
+    return digest.hexdigest()
 
 
 def _imported_roots() -> list[str]:
