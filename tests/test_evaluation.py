@@ -31,6 +31,28 @@ def test_load_method_errors():
     with pytest.raises(MethodError, match="has no class 'Nope'.*NullMethod"):
         load_method("fuelhm_baselines.trivial:Nope")
     assert parse_params(["a=2", "cv=loo", "flag=true"]) == {"a": 2, "cv": "loo", "flag": True}
+    with pytest.raises(MethodError, match="not a class"):
+        load_method("fuelhm_bench.taxonomy:INDICATOR_NAMES")
+    with pytest.raises(MethodError, match="neither subclasses .*BaseMethod nor defines get_params, fit, start_unit, "
+                                          "decide, decide_unit"):
+        load_method("fuelhm_bench.errors:MethodError")
+
+
+def test_a_method_without_base_class_loads_by_entry_point(tmp_path, monkeypatch):
+    """docs/methods.md section 4: a method need not inherit from BaseMethod. The Python API ran such a
+    method, but ``load_method`` (the CLI, the leaderboard) refused it as "not a subclass"."""
+    (tmp_path / "duck_method.py").write_text(
+        "from fuelhm_bench.methods import Decision\n"
+        "class Duck:\n"
+        "    def __init__(self, *, a=3.0):\n        self.a = a\n"
+        "    def get_params(self, deep=True):\n        return {'a': self.a}\n"
+        "    def fit(self, healthy, *, knowledge=None, raw_flights=None, random_state=None):\n        return self\n"
+        "    def start_unit(self, unit_id):\n        pass\n"
+        "    def decide(self, row, *, raw=None):\n        return Decision(0.0, False)\n"
+        "    def decide_unit(self, table, *, raw=None):\n        raise NotImplementedError\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    method = load_method("duck_method:Duck", {"a": 2.0})
+    assert type(method).__name__ == "Duck" and method.a == 2.0
 
 
 @pytest.mark.parametrize("item, match", [

@@ -9,7 +9,10 @@ import sys
 
 from fuelhm_bench.errors import MethodError
 
-__all__ = ["entry_point_problem", "load_method"]
+__all__ = ["METHOD_INTERFACE", "entry_point_problem", "load_method"]
+
+#: What the harness and the checks call on a method (a method need not inherit from ``BaseMethod``).
+METHOD_INTERFACE = ("get_params", "fit", "start_unit", "decide", "decide_unit")
 
 _IDENTIFIER = r"[A-Za-z_][A-Za-z0-9_]*"
 _ENTRY_POINT = re.compile(rf"{_IDENTIFIER}(\.{_IDENTIFIER})*:{_IDENTIFIER}(\.{_IDENTIFIER})*")
@@ -63,8 +66,13 @@ def load_method(spec: str, params: dict | None = None):
                         if isinstance(v, type) and issubclass(v, BaseMethod) and v is not BaseMethod)
         raise MethodError(f"Module '{module_name}' has no class '{cls_name}'. Methods it defines: "
                           f"{', '.join(public) or 'none'}.")
-    if not (isinstance(cls, type) and issubclass(cls, BaseMethod)):
-        raise MethodError(f"'{spec}' is not a subclass of fuelhm_bench.methods.BaseMethod.")
+    if not isinstance(cls, type):
+        raise MethodError(f"'{spec}' is not a class (got {type(cls).__name__}).")
+    if not issubclass(cls, BaseMethod):  # a method need not inherit from BaseMethod (docs/methods.md section 4)
+        missing = [n for n in METHOD_INTERFACE if not callable(getattr(cls, n, None))]
+        if missing:
+            raise MethodError(f"'{spec}' is not a method: it neither subclasses fuelhm_bench.methods.BaseMethod "
+                              f"nor defines {', '.join(missing)} (the interface: {', '.join(METHOD_INTERFACE)}).")
     try:
         return cls(**(params or {}))
     except TypeError as exc:
