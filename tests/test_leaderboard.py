@@ -20,7 +20,7 @@ def test_shipped_leaderboard_file_loads():
     ("methods: [a:B]\nscenario: [x]\n", "unknown key 'scenario'.*Did you mean 'scenarios'"),
     ("methods: []\nscenarios: [x]\n", "must both be non-empty"),
     ("methods: [{method: a:B, params: 3}]\nscenarios: [x]\n", r"methods\[0\].params must be a mapping"),
-    ("methods: [a:B\n", "cannot read"),
+    ("methods: [a:B\n", r"lb.yaml: not valid YAML \(line 2\)"),
     ("methods: [nocolon]\nscenarios: [x]\n", r"methods\[0\] must look like 'package.module:Class' .* Got 'nocolon'"),
     ("methods: [a:B, {method: 'pkg.mod:B:C'}]\nscenarios: [x]\n", r"methods\[1\].method must look like .* 'pkg.mod:B:C'"),
 ])
@@ -29,6 +29,29 @@ def test_bad_leaderboard_files(tmp_path, text, match):
     path.write_text(text)
     with pytest.raises(ScenarioError, match=match):
         LeaderboardConfig.from_yaml(path)
+
+
+def test_unreadable_leaderboard_files_name_the_file(tmp_path):
+    """A binary file (before: UnicodeDecodeError traceback), a directory, a missing file."""
+    binary = tmp_path / "board.yaml"
+    binary.write_bytes(b"\xff\xfe\x00methods")
+    with pytest.raises(ScenarioError, match=r"board.yaml: cannot read the leaderboard file: it is not UTF-8 text"):
+        LeaderboardConfig.from_yaml(binary)
+    with pytest.raises(ScenarioError, match=r"Cannot read the leaderboard file .*: Is a directory"):
+        LeaderboardConfig.from_yaml(tmp_path)
+    with pytest.raises(ScenarioError, match=r"Cannot read the leaderboard file .*: No such file"):
+        LeaderboardConfig.from_yaml(tmp_path / "missing.yaml")
+
+
+def test_exponent_notation_is_a_number_in_params(tmp_path):
+    """``1e-3`` is a string in YAML 1.1 (PyYAML); every user means a number (reported: ``--param lr=1e-3``
+    reached the method as '1e-3')."""
+    from fuelhm_bench.benchmark.loading import parse_params
+
+    path = tmp_path / "lb.yaml"
+    path.write_text("methods:\n  - method: a.b:C\n    params: {lr: 1e-3, a: 5E0, name: e5}\nscenarios: [paper_2012]\n")
+    assert dict(LeaderboardConfig.from_yaml(path).methods[0].params) == {"lr": 0.001, "a": 5.0, "name": "e5"}
+    assert parse_params(["lr=1e-3", "n=-2e2", "tag=1e"]) == {"lr": 0.001, "n": -200.0, "tag": "1e"}
 
 
 def test_tiny_leaderboard_ranks_methods(tmp_path, tiny_scenario):

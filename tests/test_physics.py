@@ -177,6 +177,30 @@ def test_model_yaml_round_trip(tmp_path):
         save_model(m, path)
 
 
+@pytest.mark.parametrize("content, match", [
+    (b"\xff\xfe\x00\x01", r"m.yaml: cannot read the model file: it is not UTF-8 text"),
+    (b"effects: [rod_friction]\n", r"m.yaml: section 'effects' must be a mapping of effect id .* Got list"),
+    (b"effects:\n  rod_friction: 5\n", r"m.yaml: effects.rod_friction must be a mapping of the effect's parameters .* Got 5"),
+    (b"effects:\n  rod_friction: [1, 2]\n", r"effects.rod_friction must be a mapping .* Got \[1, 2\]"),
+    (b"servovalve: {null_bias_a: [1\n", r"m.yaml: not valid YAML \(line 2\)"),
+])
+def test_bad_model_files_name_the_file_and_section(tmp_path, content, match):
+    """Each of these was a traceback (UnicodeDecodeError, AttributeError, TypeError) before."""
+    from fuelhm_bench.errors import ModelFileError
+
+    path = tmp_path / "m.yaml"
+    path.write_bytes(content)
+    with pytest.raises(ModelFileError, match=match):
+        load_model(path)
+
+
+def test_model_file_reads_exponent_notation(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_text("servovalve: {null_bias_a: 1e-4}\neffects: {rod_friction: {coulomb_n: 5e2}}\n")
+    model = load_model(path)
+    assert model.servovalve.null_bias_a == 1e-4 and model.effects[0].coulomb_n == 500.0
+
+
 def test_manufacture_is_seeded_and_disperses():
     a = manufacture(NOMINAL, np.random.default_rng(1))
     b = manufacture(NOMINAL, np.random.default_rng(1))

@@ -29,7 +29,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
-import yaml
 
 from fuelhm_bench.errors import FuelHMError, ParameterError, ScenarioError
 
@@ -79,11 +78,10 @@ class LeaderboardConfig:
         """Load ``leaderboard/methods.yaml`` (safe loader; errors name the file and field)."""
         from fuelhm_bench.methods.sandbox import Limits
 
+        from fuelhm_bench.yamlfiles import read_yaml
+
         path = Path(path)
-        try:
-            data = yaml.safe_load(path.read_text())
-        except (OSError, yaml.YAMLError) as exc:
-            raise ScenarioError(f"{path}: cannot read the leaderboard file: {exc}") from None
+        data = read_yaml(path, "leaderboard file", ScenarioError)
         if not isinstance(data, dict):
             raise ScenarioError(f"{path}: a leaderboard file is a mapping with 'methods' and 'scenarios'.")
         allowed = {"methods", "scenarios", "seeds", "scale", "timeout_s", "fidelity", "limits"}

@@ -8,7 +8,7 @@ __all__ = ["parse_params"]
 
 
 def parse_params(items: list[str], option: str = "--param") -> dict:
-    """Parse ``NAME=VALUE`` strings; values are read as YAML scalars (numbers, booleans, strings, lists).
+    """Parse ``NAME=VALUE`` strings; values are read as YAML scalars (numbers, ``1e-3`` too, booleans, strings, lists).
 
     Raises
     ------
@@ -17,13 +17,15 @@ def parse_params(items: list[str], option: str = "--param") -> dict:
     """
     import yaml
 
+    from fuelhm_bench.yamlfiles import safe_load
+
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ParameterError(f"{option} must look like NAME=VALUE. Got '{item}' instead.")
         try:
-            out[key.strip()] = yaml.safe_load(value) if value.strip() else ""
+            out[key.strip()] = safe_load(value) if value.strip() else ""
         except yaml.YAMLError as exc:
             first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise ParameterError(f"{option} {item}: the value '{value}' does not parse as a YAML scalar "

@@ -184,7 +184,14 @@ class LoopModel:
                 continue
             if key == "effects":
                 effs = []
+                if not isinstance(section or {}, Mapping):
+                    raise ModelFileError(f"{source}: section 'effects' must be a mapping of effect id to its "
+                                         f"parameters (e.g. 'rod_friction: {{coulomb_n: 500}}'). Got "
+                                         f"{type(section).__name__} instead.")
                 for eid, params in (section or {}).items():
+                    if not isinstance(params or {}, Mapping):
+                        raise ModelFileError(f"{source}: effects.{eid} must be a mapping of the effect's parameters "
+                                             f"(or empty for its defaults). Got {params!r} instead.")
                     try:
                         effs.append(make_effect(eid, **(params or {})))
                     except FuelHMError as exc:
@@ -233,15 +240,9 @@ def save_model(model: LoopModel, path: str | Path, *, overwrite: bool = False, h
 
 def load_model(path: str | Path) -> LoopModel:
     """Load a model YAML file (safe loader), with errors naming the file and field."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ModelFileError(f"Cannot read the model file {path}: {exc.strerror or exc}.") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ModelFileError(f"{path}: not valid YAML: {exc}") from None
+    from fuelhm_bench.yamlfiles import read_yaml
+
+    data = read_yaml(path, "model file", ModelFileError)
     return LoopModel.from_dict(data or {}, source=str(path))
 
 

@@ -32,6 +32,7 @@ from pathlib import Path
 import yaml
 
 from fuelhm_bench.errors import ScenarioError
+from fuelhm_bench.yamlfiles import SafeLoader
 from fuelhm_bench.scenarios._fields import (
     MISSING,
     Problem,
@@ -68,8 +69,8 @@ class _TooDeep(Exception):
         self.mark = mark
 
 
-class _BoundedLoader(yaml.SafeLoader):
-    """PyYAML's safe loader whose composer refuses nesting deeper than :data:`MAX_DEPTH`."""
+class _BoundedLoader(SafeLoader):
+    """The safe loader (:class:`fuelhm_bench.yamlfiles.SafeLoader`) whose composer refuses nesting deeper than :data:`MAX_DEPTH`."""
 
     def __init__(self, stream) -> None:
         super().__init__(stream)
