@@ -11,7 +11,8 @@ from fuelhm_bench.errors import OutputPathError
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
     """Limits, results store, resume and Dask options."""
-    g = p.add_argument_group("limits per method (defaults: the config file's, else 900 s wall, CPU = wall, 4096 MiB)")
+    g = p.add_argument_group("limits per method (defaults: the leaderboard file's, else CPU time = wall time, 4096 MiB, "
+                                  "1024 KiB of log)")
     g.add_argument("--cpu-time", type=positive_float, default=None, metavar="S", help="CPU-time limit [s]")
     g.add_argument("--memory", type=positive_float, default=None, metavar="MIB",
                    help="address-space limit of the method's process [MiB] (>= 256)")

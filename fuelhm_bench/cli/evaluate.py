@@ -29,7 +29,7 @@ def register(sub) -> None:
                    help="simulation of the scored flights: physics (simulator + on-board extraction) or surrogate "
                         "(healthy Gaussian draws + ITL shifts, much faster); default: the scenario's")
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenario's master seed")
-    p.add_argument("--timeout", type=positive_float, default=600.0, help="wall-time limit per method [s]")
+    p.add_argument("--timeout", type=positive_float, default=600.0, help="wall-time limit per method [s] (default 600)")
     p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of test units (extended until every mode of the fleet is represented)")
     p.add_argument("--minutes", type=positive_float, default=None,
                    help="override the flight duration [min] (quick looks; >= engine start + 1 min)")

@@ -15,11 +15,15 @@ def register(sub) -> None:
                                    "every scenario and seed sealed, store each result in an SQLite results store "
                                    "and write leaderboard.md / leaderboard.csv ranked by summary score plus one "
                                    "report per scenario, seed and method setting, all generated from the store. "
-                                   "Killed and started again, it evaluates only what the store is missing.")
+                                   "Killed and started again, it evaluates only what the store is missing. Exit "
+                                   "status 3 when an entry did not finish ok (its row says why; every other result "
+                                   "is kept and the views are written).")
     p.add_argument("--config", default="leaderboard/methods.yaml", help="leaderboard file")
     p.add_argument("--scale", type=positive_float, default=None, help="override the file's test-fleet scale")
     p.add_argument("--fidelity", choices=("physics", "surrogate"), default=None, help="override the file's fidelity")
     p.add_argument("--timeout", type=positive_float, default=None, help="override the file's wall-time limit [s]")
+    p.add_argument("--minutes", type=positive_float, default=None,
+                   help="override every scenario's flight duration [min] (quick looks; >= engine start + 1 min)")
     p.add_argument("--out", required=True, help="output directory")
     add_run_options(p)
     p.set_defaults(func=run)
@@ -36,8 +40,9 @@ def run(args: argparse.Namespace) -> int:
                                  limits=tuple(sorted(limits_from(args, dict(config.limits)).items())))
     out = check_results_dir(args.out, args.store, args.force)
     board = run_board(config, out, store_path=args.store, rerun=args.rerun, jobs=args.jobs, scheduler=args.scheduler,
-                      method_seed=args.method_seed, cache_dir=args.cache_dir, progress=progress_bar)
+                      method_seed=args.method_seed, cache_dir=args.cache_dir, flight_minutes=args.minutes,
+                      progress=progress_bar)
     cols = [c for c in ("scenario", "method", "params", "status", "summary_score") if c in board]
     print(board[cols].to_string(index=False))
     print(f"wrote {out / 'leaderboard.md'} and {out / 'index.html'}")
-    return 0
+    return 0 if (board["status"] == "ok").all() else 3
