@@ -87,11 +87,35 @@ def test_evaluate_command(tiny, tmp_path, capsys):
     assert json.loads((folder / "result.json").read_text())["method_params"]["a"] == 3
     assert "Evaluation on" in (sdir / "report.md").read_text()
     assert (out / "results.sqlite").is_file()
-    # a misspelt --param is named
+    # a misspelt --param is named before anything runs: no row under the misspelt name is stored
     capsys.readouterr()
     assert main(["evaluate", "--method", "fuelhm_baselines.trivial:NullMethod", "--param", "b=3",
                  "--scenario", str(path), "--out", str(tmp_path / "eval2")]) == 2
     assert "--param b: no evaluated method has such a hyperparameter" in capsys.readouterr().err
+    assert not (tmp_path / "eval2" / "results.sqlite").exists()
+
+
+def test_param_reaches_a_constructor_without_default(tiny, tmp_path, monkeypatch, capsys):
+    """``--param`` values the constructor takes are passed to it, so a hyperparameter without a default
+    can be given on the command line (before: "Cannot build Required with {}", --param being applied
+    with set_params after construction)."""
+    path, _ = tiny
+    (tmp_path / "required_method.py").write_text(
+        "from fuelhm_baselines.paper_mahalanobis import PaperMahalanobis\n"
+        "class Required(PaperMahalanobis):\n"
+        "    def __init__(self, *, scale_a, **kw):\n"
+        "        super().__init__(**kw)\n"
+        "        self.scale_a = scale_a\n"
+        "    @classmethod\n"
+        "    def _get_param_names(cls):\n"
+        "        return sorted(set(PaperMahalanobis._get_param_names()) | {'scale_a'})\n")
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out"
+    assert main(["evaluate", "--method", "required_method:Required", "--param", "scale_a=1e-3",
+                 "--scenario", str(path), "--out", str(out), "--timeout", "120"]) == 0, capsys.readouterr().err
+    (sdir,) = [d for d in out.iterdir() if d.is_dir() and d.name != "logs"]
+    (folder,) = [d for d in sdir.iterdir() if d.is_dir()]
+    assert json.loads((folder / "result.json").read_text())["method_params"]["scale_a"] == 0.001
 
 
 def test_paper_command_small(tiny, tmp_path, capsys):

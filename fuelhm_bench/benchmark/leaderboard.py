@@ -301,6 +301,34 @@ def _check_modules_visible(config: LeaderboardConfig, hidden: dict) -> None:
                     f"(--out results/).")
 
 
+def _check_shared_params(config: LeaderboardConfig, shared: dict, limits: dict, deny: list) -> None:
+    """Refuse, before any data is built, a shared hyperparameter (``--param``) that no method takes.
+
+    Each method is started sealed (import and construction only) and reports its hyperparameters;
+    a method that does not start is left out here (its failure becomes its row later). Before, a
+    misspelt ``--param`` was found after the run, whose rows (run with the defaults, stored under
+    the misspelt name) stayed in the store and the views.
+    """
+    if not shared:
+        return
+    from fuelhm_bench.methods.sandbox import SealedFailure, SealedMethod
+
+    taken, started = set(), 0
+    for entry in dict.fromkeys(config.methods):
+        sealed = SealedMethod(entry.method, params=dict(entry.params), shared_params=shared, limits=limits, deny=deny)
+        try:
+            info = sealed.start()
+        except SealedFailure:
+            continue
+        finally:
+            sealed.close()
+        started += 1
+        taken |= set(info.get("params") or {})
+    unknown = [k for k in shared if k not in taken]
+    if started and unknown:
+        raise ParameterError(f"--param {', '.join(unknown)}: no evaluated method has such a hyperparameter.")
+
+
 def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params: dict | None = None,
               rerun: bool = False, jobs: int = 1, scheduler: str | None = None, method_seed: int = 0,
               cache_dir=None, flight_minutes=None, progress=None,
@@ -344,6 +372,7 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
     if cache_dir not in (None, False):
         hidden["the simulation cache (--cache-dir)"] = Path(cache_dir).resolve()
     _check_modules_visible(config, hidden)
+    _check_shared_params(config, shared_params or {}, limits, [str(p) for p in hidden.values()])
     store = ResultStore(store_path)
     try:
         stored = store.keys()
@@ -439,18 +468,5 @@ def evaluation_config(methods: list[str], scenario: str, *, seed=None, scale: fl
                              float(timeout_s), fidelity, tuple(sorted((limits or {}).items())))
 
 
-def check_shared_params(board: pd.DataFrame, shared: dict) -> None:
-    """Raise when a ``--param`` was taken by no method that started (a misspelt name)."""
-    if not shared or board.empty:
-        return
-    started = [p for p, s in zip(board["method_params"], board["status"])
-               if isinstance(p, dict) and (p or s == "ok")]
-    if not started:
-        return
-    unknown = [k for k in shared if not any(k in p for p in started)]
-    if unknown:
-        raise ParameterError(f"--param {', '.join(unknown)}: no evaluated method has such a hyperparameter.")
-
-
-__all__ += ["build_data", "check_shared_params", "evaluation_config"]
+__all__ += ["build_data", "evaluation_config"]
 del dataclasses

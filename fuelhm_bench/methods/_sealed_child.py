@@ -132,14 +132,14 @@ class _Child:
         import pandas  # noqa: F401
 
         import fuelhm_bench.methods  # noqa: F401
-        from fuelhm_bench.methods.loading import load_method
+        from fuelhm_bench.methods.loading import _accepted, load_method
 
         sandbox = _landlock(p["readable"] + ["/usr", "/lib", "/lib64", "/etc", "/proc", "/sys", "/dev/urandom",
                                              "/dev/null", "/dev/zero"],
                             [p["scratch"], "/dev/null", *_SHARED_MEMORY], p.get("listable", []))
         method = p["method"]
-        if isinstance(method, str):
-            self.method = load_method(method, p["params"])
+        if isinstance(method, str):  # shared params its constructor takes are passed to it
+            self.method = load_method(method, p["params"], p["shared_params"])
         else:
             self.method = method if not isinstance(method, bytes) else pickle.loads(method)
             cls = type(self.method)
@@ -151,9 +151,11 @@ class _Child:
                 sys.modules[cls.__module__] = module
         get_params = getattr(self.method, "get_params", None)
         params = get_params() if callable(get_params) else {}
-        shared = {k: v for k, v in p["shared_params"].items() if k in params}
-        if shared:
-            self.method.set_params(**shared)
+        shared = {k: v for k, v in p["shared_params"].items() if k in params and k not in (p["params"] or {})}
+        built = _accepted(type(self.method), shared) if isinstance(method, str) else {}  # passed to the constructor
+        late = {k: v for k, v in shared.items() if k not in built}
+        if late:
+            self.method.set_params(**late)
             params = get_params()
         self.reply(repr=repr(self.method)[:2000], params=_json_value(params),
                    shared_applied=sorted(shared), sandbox=sandbox,

@@ -32,8 +32,12 @@ def entry_point_problem(spec) -> str | None:
     return None
 
 
-def load_method(spec: str, params: dict | None = None):
+def load_method(spec: str, params: dict | None = None, shared: dict | None = None):
     """Instantiate ``module:Class`` with keyword hyperparameters.
+
+    ``shared`` holds hyperparameters meant for every method that has them (``--param``): those
+    the constructor takes by name are passed to it (so a hyperparameter without a default can be
+    given that way), the others are left to the caller; ``params`` wins over ``shared``.
 
     The module is imported from the import path plus the current directory (a
     submission next to the user, as ``python -m`` would find it). The harness
@@ -73,9 +77,24 @@ def load_method(spec: str, params: dict | None = None):
         if missing:
             raise MethodError(f"'{spec}' is not a method: it neither subclasses fuelhm_bench.methods.BaseMethod "
                               f"nor defines {', '.join(missing)} (the interface: {', '.join(METHOD_INTERFACE)}).")
+    kwargs = {**_accepted(cls, shared or {}), **(params or {})}
     try:
-        return cls(**(params or {}))
+        return cls(**kwargs)
     except TypeError as exc:
         names = sorted(cls._get_param_names()) if hasattr(cls, "_get_param_names") else []
-        raise MethodError(f"Cannot build {cls_name} with {params}: {exc}. Its hyperparameters: "
+        raise MethodError(f"Cannot build {cls_name} with {kwargs}: {exc}. Its hyperparameters: "
                           f"{', '.join(names) or 'none'}.") from None
+
+
+def _accepted(cls: type, values: dict) -> dict:
+    """The items of ``values`` that ``cls``'s constructor takes by keyword."""
+    import inspect
+
+    if not values:
+        return {}
+    try:
+        parameters = inspect.signature(cls).parameters
+    except (TypeError, ValueError):
+        return {}
+    named = {n for n, q in parameters.items() if q.kind in (q.POSITIONAL_OR_KEYWORD, q.KEYWORD_ONLY)}
+    return {k: v for k, v in values.items() if k in named}
