@@ -47,6 +47,12 @@ EXTENDED_INDICATOR_UNITS: dict[str, str] = {
 #: The paper's ten followed by the extended indicators: every name a table may carry.
 ALL_INDICATOR_NAMES: tuple[str, ...] = INDICATOR_NAMES + EXTENDED_INDICATOR_NAMES
 
+#: The columns of what a method sees of a flight, in order: an observation row in ``decide`` and
+#: every row of the tables given to ``fit`` (docs/methods.md section 2); the checks' data have them too.
+OBSERVATION_COLUMNS: tuple[str, ...] = (
+    "flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *(f"{n}_valid" for n in INDICATOR_NAMES),
+    *EXTENDED_INDICATOR_NAMES, *(f"{n}_valid" for n in EXTENDED_INDICATOR_NAMES))
+
 #: True mode of a fault outside the seven modes (a scenario's ``unknown_faults``): detection counts
 #: it, and a method diagnoses it right only by naming no single mode (docs/scoring.md).
 UNKNOWN_MODE: str = "unknown"

@@ -229,7 +229,6 @@ def test_check_data_is_reproducible_and_realistic():
     assert a.units[list(INDICATOR_NAMES)].isna().sum().sum() == 1
     missing = a.units[a.units["Hys0"].isna()]
     assert not missing["Hys0_valid"].iloc[0]
-    assert missing["quality_reason"].iloc[0] == "not_supported"
 
 
 @parametrize_with_checks([NullMethod(), RandomMethod(alarm_probability=0.1)])
@@ -269,3 +268,21 @@ def test_sealed_checks_pass_a_class_defined_in_a_script_or_notebook():
              "Interval, RandomState\n" + textwrap.dedent(inspect.getsource(test_methods_base.ZScore))
     exec(compile(source, "<notebook cell>", "exec"), cell.__dict__)
     check_method(cell.ZScore(a=2.0), timeout_s=120.0)
+
+
+def test_check_data_have_exactly_the_columns_the_benchmark_sends():
+    """The checks' tables and the harness's observation rows carry the same columns, in order. Before, the
+    check data had n_points / quality_reason (not observed in the benchmark) and lacked the 11 extended
+    indicators: a method reading n_points passed the checks and failed in evaluate with KeyError."""
+    from fuelhm_bench.benchmark.harness import observation_row
+    from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, OBSERVATION_COLUMNS
+
+    data = make_check_data(0)
+    for table in (data.healthy, data.other_healthy, data.units):
+        assert tuple(table.columns) == OBSERVATION_COLUMNS
+    row = observation_row({"indicators": np.zeros(10), "valid": np.ones(10), "extended": np.zeros(11),
+                           "extended_valid": np.ones(11)}, unit_id=0, flight_index=0)
+    assert tuple(row.index) == OBSERVATION_COLUMNS
+    v_in7 = data.units["V_in7"]
+    assert 0.2 < v_in7.isna().mean() < 0.8 and (data.units["V_in7_valid"] == v_in7.notna()).all()
+    assert data.units[list(EXTENDED_INDICATOR_NAMES)].drop(columns="V_in7").notna().all().all()

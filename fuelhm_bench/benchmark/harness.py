@@ -55,15 +55,12 @@ import numpy as np
 import pandas as pd
 
 from fuelhm_bench.errors import DataFormatError, FuelHMError, ParameterError
-from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS
+from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS, OBSERVATION_COLUMNS
 
 __all__ = ["EnvEvaluation", "Outcome", "action_from_decision", "evaluate", "observation_row",
            "prepare_evaluation", "run_in_env", "split_training"]
 
-_VALID = tuple(f"{n}_valid" for n in INDICATOR_NAMES)
-_EXT_VALID = tuple(f"{n}_valid" for n in EXTENDED_INDICATOR_NAMES)
-_ROW_INDEX = pd.Index(["flight_id", "unit_id", "flight_index", *INDICATOR_NAMES, *_VALID,
-                       *EXTENDED_INDICATOR_NAMES, *_EXT_VALID])
+_ROW_INDEX = pd.Index(OBSERVATION_COLUMNS)
 
 
 # --------------------------------------------------------------------------- the adapter

@@ -244,9 +244,10 @@ class BaseMethod(abc.ABC):
         Parameters
         ----------
         observation_row : pandas.Series or mapping
-            One row of the indicator table (indicators, ``<name>_valid``,
-            ``n_points``, ``quality_reason``, ``flight_id``, ``unit_id``,
-            ``flight_index``). Flights must come in increasing ``flight_index``.
+            One row of the indicator table: the columns of
+            :data:`fuelhm_bench.taxonomy.OBSERVATION_COLUMNS` (ids, the ten
+            indicators, the extended ones, their ``<name>_valid`` flags). Flights
+            must come in increasing ``flight_index``.
         raw : RawFlight or None, default=None
             The flight's full-rate samples (:class:`fuelhm_bench.methods.raw.RawFlight`);
             required by, and only passed to, a method with ``needs_raw = True``,

@@ -32,7 +32,7 @@ from fuelhm_bench.methods.base import (clone_method, has_batch_path, method_need
 from fuelhm_bench.methods.decision import decision_problem
 from fuelhm_bench.methods.knowledge import Knowledge
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
-from fuelhm_bench.taxonomy import INDICATOR_NAMES, MODE_IDS
+from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS, OBSERVATION_COLUMNS
 
 __all__ = ["CheckData", "MethodCheck", "check_method", "iter_checks", "make_check_data",
            "parametrize_with_checks"]
@@ -41,6 +41,9 @@ __all__ = ["CheckData", "MethodCheck", "check_method", "iter_checks", "make_chec
 #: units of :data:`fuelhm_bench.taxonomy.INDICATOR_UNITS` (mA, mm/s, mm/s/mA).
 _HEALTHY_MEAN = np.array([-3.0, -20.0, 3.0, 20.0, 0.1, 0.2, 0.05, 6.0, 6.0, 3.0])
 _HEALTHY_STD = np.array([0.05, 0.5, 0.05, 0.5, 0.02, 0.02, 0.01, 0.1, 0.1, 0.1])
+# Extended indicators (EXTENDED_INDICATOR_NAMES): mean and scatter of paper_2012's healthy training fleet.
+_EXT_MEAN = np.array([-4.58, 4.67, -15.33, 15.35, -50.6, 51.9, 0.499, 0.844, 0.0494, 0.0231, 0.0005])
+_EXT_STD = np.array([0.22, 0.21, 0.031, 0.082, 0.92, 0.82, 0.020, 0.012, 0.0066, 0.0017, 0.0001])
 
 #: Seeds used by the checks.
 _SEED = 0
@@ -107,9 +110,15 @@ def _indicator_frame(values: np.ndarray, unit_ids: Sequence[Any], flight_index: 
         data[name] = values[:, j].astype(np.float64)
     for j, name in enumerate(INDICATOR_NAMES):
         data[f"{name}_valid"] = np.isfinite(values[:, j])
-    data["n_points"] = rng.integers(500, 2000, size=n).astype(np.int64)
-    data["quality_reason"] = np.where(np.isfinite(values).all(axis=1), "", "not_supported")
-    return pd.DataFrame(data)
+    # The extended indicators, as the benchmark gives them: healthy scatter of a physics fleet
+    # (paper_2012), about half of the flights without V_in7 (NaN, flag False).
+    ext = _EXT_MEAN + _EXT_STD * rng.standard_normal((n, len(EXTENDED_INDICATOR_NAMES)))
+    ext[rng.random(n) < 0.5, EXTENDED_INDICATOR_NAMES.index("V_in7")] = np.nan
+    for j, name in enumerate(EXTENDED_INDICATOR_NAMES):
+        data[name] = ext[:, j]
+    for j, name in enumerate(EXTENDED_INDICATOR_NAMES):
+        data[f"{name}_valid"] = np.isfinite(ext[:, j])
+    return pd.DataFrame(data, columns=list(OBSERVATION_COLUMNS))
 
 
 def _healthy_table(n_units: int, n_flights: int, prefix: str,
