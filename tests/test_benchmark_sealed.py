@@ -241,3 +241,22 @@ def test_a_method_module_inside_a_hidden_folder_is_refused_first(tmp_path, monke
     with pytest.raises(ParameterError, match="--cache-dir"):  # the same for a cache holding the module
         run_board(config, tmp_path / "results", cache_dir=tmp_path, log=lines.append)
     assert not (tmp_path / "results").exists()
+
+
+def test_a_denied_file_access_says_what_the_sandbox_allows(evaluation, tmp_path, monkeypatch):
+    """A method writing beside its module gets its PermissionError with a hint at the sandbox's rules
+    (before: the bare PermissionError, which reads like a bug of the user's machine)."""
+    project = tmp_path / "project"
+    project.mkdir()
+    (project / "writes_beside.py").write_text(
+        "from pathlib import Path\nfrom fuelhm_baselines.trivial import NullMethod\n"
+        "class WritesBeside(NullMethod):\n"
+        "    def _fit(self, healthy, *, knowledge, raw_flights, rng):\n"
+        "        (Path(__file__).parent / 'cache.bin').write_bytes(b'x')\n")
+    monkeypatch.chdir(project)
+    outcome = run_in_env("writes_beside:WritesBeside", evaluation, timeout_s=120)
+    if outcome.sandbox.startswith("no file-system restriction"):
+        pytest.skip(f"the file system is not sealed here: {outcome.sandbox}")
+    assert outcome.status == "error"
+    assert "PermissionError" in outcome.message and "write only its scratch directory" in outcome.message
+    assert not (project / "cache.bin").exists()

@@ -103,9 +103,15 @@ def _json_value(v):
     return repr(v)
 
 
+_SANDBOX_HINT = (" (the sealed process may read its import path, its package and the Python installation, and "
+                 "write only its scratch directory, which is also $HOME and $TMPDIR: docs/methods.md section 7)")
+
+
 def _one_line(exc: BaseException) -> str:
-    text = f"{type(exc).__name__}: {exc}".replace("\n", " ")
-    return text[:400]
+    text = f"{type(exc).__name__}: {exc}".replace("\n", " ")[:400]
+    if isinstance(exc, (PermissionError, FileNotFoundError)) and getattr(exc, "filename", None):
+        text += _SANDBOX_HINT  # a file outside what the sandbox allows, or a path under the scratch $HOME
+    return text
 
 
 class _Child:
