@@ -154,3 +154,26 @@ def test_a_malformed_method_entry_point_is_refused_before_any_data(tmp_path, cap
     err = capsys.readouterr().err
     assert "--method must look like 'package.module:Class'" in err and "'a:B:C'" in err
     assert not out.exists() and not (tmp_path / "cache").exists()
+
+
+@pytest.mark.parametrize("option, value, match", [
+    ("--timeout", "1e300", r"argument --timeout: must be a number in \[0.001, 2.592e\+06\] s"),
+    ("--memory", "1e300", r"argument --memory: must be a number in \[256, "),
+    ("--cpu-time", "0", r"argument --cpu-time: must be a number in \[0.001, "),
+    ("--seed", "99999999999999999999999", r"argument --seed: must be an integer in \[0, 9223372036854775807\]"),
+    ("--minutes", "1e6", r"argument --minutes: must be a number in \(0, 1440\] min"),
+])
+def test_out_of_range_run_options_are_refused_before_anything_is_written(tmp_path, capsys, option, value, match):
+    """Each was a traceback (OverflowError in a clock or in SQLite, a 44.7 GiB allocation) after the
+    results store had been created."""
+    import re
+
+    out = tmp_path / "out"
+    try:
+        code = main(["evaluate", "--method", "fuelhm_baselines.trivial:NullMethod", "--scenario", "paper_2012",
+                     "--fidelity", "surrogate", "--scale", "0.1", option, value, "--out", str(out)])
+    except SystemExit as exc:  # argparse's own refusal
+        code = exc.code
+    assert code == 2
+    assert re.search(match, capsys.readouterr().err)
+    assert not out.exists()

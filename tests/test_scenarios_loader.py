@@ -46,7 +46,7 @@ CASES = {
                                       "9000.0", None),
     "drift_breaks_physics": (37, "drift[0].value", "ServovalveParams.spool_time_constant_s is in [1e-05, 0.1]", "50.0",
                              "from 0.0025 to 0.1275"),
-    "missing_key": (12, "seeds.master", "given (an integer >= 0)", "nothing (the key is missing)", None),
+    "missing_key": (12, "seeds.master", "given (an integer in [0, 9223372036854775807])", "nothing (the key is missing)", None),
     "duplicate_key": (8, "fleet.units", "given once in its mapping", "'units'", None),
     "future_schema_version": (2, "schema_version", "one of 1", "2", "newer fuelhm-bench"),
 }

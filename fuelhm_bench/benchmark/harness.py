@@ -265,9 +265,11 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
 
     sc = resolve_scenario(scenario)
     if seed is not None:
-        if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
-            raise ParameterError(f"The 'seed' parameter of prepare_evaluation must be an int >= 0 or None. "
-                                 f"Got {seed!r} instead.")
+        from fuelhm_bench.scenarios.schema import MAX_SEED
+
+        if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or not 0 <= seed <= MAX_SEED:
+            raise ParameterError(f"The 'seed' parameter of prepare_evaluation must be an int in [0, {MAX_SEED}] or "
+                                 f"None. Got {seed!r} instead.")
         sc = dataclasses.replace(sc, seeds=dataclasses.replace(sc.seeds, master=int(seed), training=None, test=None))
     if not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and np.isfinite(scale) and scale > 0):
         raise ParameterError(f"The 'scale' parameter of prepare_evaluation must be a finite number > 0. "

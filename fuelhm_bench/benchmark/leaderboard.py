@@ -116,10 +116,13 @@ class LeaderboardConfig:
         fidelity = data.get("fidelity")
         if fidelity not in (None, "physics", "surrogate"):
             raise ScenarioError(f"{path}: fidelity must be one of physics, surrogate or null. Got {fidelity!r} instead.")
+        from fuelhm_bench.scenarios.schema import MAX_SEED
+
         seeds = data.get("seeds") or [None]
         if not isinstance(seeds, list) or not all(s is None or (isinstance(s, int) and not isinstance(s, bool)
-                                                                and s >= 0) for s in seeds):
-            raise ScenarioError(f"{path}: seeds must be a list of integers >= 0 or null. Got {seeds!r} instead.")
+                                                                and 0 <= s <= MAX_SEED) for s in seeds):
+            raise ScenarioError(f"{path}: seeds must be a list of integers in [0, {MAX_SEED}] or null. Got {seeds!r} "
+                                f"instead.")
         scale = _number(path, "scale", data.get("scale", 1.0), positive=True)
         timeout = _number(path, "timeout_s", data.get("timeout_s", 900.0), positive=True)
         limits = data.get("limits") or {}

@@ -24,14 +24,33 @@ def positive_int(text: str) -> int:
     return value
 
 
+def flight_minutes(text: str) -> float:
+    """argparse type of ``--minutes`` overriding a scenario's flight duration: a number in (0, 1440] min.
+
+    The lower bound depends on the scenario (engine start + 1 min) and is checked with it.
+    """
+    from fuelhm_bench.scenarios.schema import MAX_DURATION_MIN
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number in (0, {MAX_DURATION_MIN:g}] min. Got '{text}' "
+                                         f"instead.") from None
+    if not 0.0 < value <= MAX_DURATION_MIN:  # (NaN fails too)
+        raise argparse.ArgumentTypeError(f"must be a number in (0, {MAX_DURATION_MIN:g}] min. Got {text} instead.")
+    return value
+
+
 def non_negative_int(text: str) -> int:
-    """argparse type: an integer >= 0."""
+    """argparse type: an integer in [0, 2**63 - 1] (a seed, a count: what the results store can hold)."""
+    from fuelhm_bench.scenarios.schema import MAX_SEED
+
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be an integer >= 0, got '{text}'") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {value}")
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, {MAX_SEED}], got {value}")
     return value
 
 

@@ -5,18 +5,28 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fuelhm_bench.cli._common import non_negative_int, positive_float, positive_int
+from fuelhm_bench.cli._common import bounded, non_negative_int, positive_int
 from fuelhm_bench.errors import OutputPathError
+
+
+def limit_type(field: str):
+    """argparse type of the command-line limit ``field`` of :class:`~fuelhm_bench.methods.sandbox.Limits`
+    (``wall_s``, ``cpu_s``, ``memory_mb``, ``log_kb``): a number in its allowed range, with its unit."""
+    from fuelhm_bench.methods.sandbox import LIMIT_MAX
+
+    low, unit = {"wall_s": (0.001, "s"), "cpu_s": (0.001, "s"), "memory_mb": (256.0, "MiB"),
+                 "log_kb": (1.0, "KiB")}[field]
+    return bounded(float, low, LIMIT_MAX[field], unit)
 
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
     """Limits, results store, resume and Dask options."""
     g = p.add_argument_group("limits per method (defaults: the leaderboard file's, else CPU time = wall time, 4096 MiB, "
                                   "1024 KiB of log)")
-    g.add_argument("--cpu-time", type=positive_float, default=None, metavar="S", help="CPU-time limit [s]")
-    g.add_argument("--memory", type=positive_float, default=None, metavar="MIB",
+    g.add_argument("--cpu-time", type=limit_type("cpu_s"), default=None, metavar="S", help="CPU-time limit [s]")
+    g.add_argument("--memory", type=limit_type("memory_mb"), default=None, metavar="MIB",
                    help="address-space limit of the method's process [MiB] (>= 256)")
-    g.add_argument("--log-size", type=positive_float, default=None, metavar="KIB",
+    g.add_argument("--log-size", type=limit_type("log_kb"), default=None, metavar="KIB",
                    help="cut each method's stdout/stderr log at this size [KiB] (default 1024)")
     g = p.add_argument_group("results store and resume")
     g.add_argument("--store", default=None, help="SQLite results store (default: <out>/results.sqlite)")

@@ -7,6 +7,7 @@ import json
 import sys
 
 from fuelhm_bench.cli._common import check_output_dir, non_negative_int, positive_float, positive_int, progress_bar
+from fuelhm_bench.cli._harness import limit_type
 
 
 def register(sub) -> None:
@@ -32,7 +33,7 @@ def register(sub) -> None:
     p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of scored units")
     p.add_argument("--doe-units", type=positive_int, default=6, help="units of the ITL design (default 6)")
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenario's master seed")
-    p.add_argument("--timeout", type=positive_float, default=600.0, help="time limit per run [s]")
+    p.add_argument("--timeout", type=limit_type("wall_s"), default=600.0, help="time limit per run [s]")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=run)
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fuelhm_bench.cli._common import non_negative_int, positive_float, progress_bar
-from fuelhm_bench.cli._harness import add_run_options, check_results_dir, limits_from
+from fuelhm_bench.cli._common import flight_minutes, non_negative_int, positive_float, progress_bar
+from fuelhm_bench.cli._harness import add_run_options, check_results_dir, limit_type, limits_from
 
 
 def register(sub) -> None:
@@ -31,9 +31,9 @@ def register(sub) -> None:
                    help="simulation of the scored flights: physics (simulator + on-board extraction) or surrogate "
                         "(healthy Gaussian draws + ITL shifts, much faster); default: the scenario's")
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenario's master seed")
-    p.add_argument("--timeout", type=positive_float, default=600.0, help="wall-time limit per method [s] (default 600)")
+    p.add_argument("--timeout", type=limit_type("wall_s"), default=600.0, help="wall-time limit per method [s] (default 600)")
     p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of test units (extended until every mode of the fleet is represented)")
-    p.add_argument("--minutes", type=positive_float, default=None,
+    p.add_argument("--minutes", type=flight_minutes, default=None,
                    help="override the flight duration [min] (quick looks; >= engine start + 1 min)")
     p.add_argument("--out", required=True, help="output directory")
     add_run_options(p)

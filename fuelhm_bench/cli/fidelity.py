@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fuelhm_bench.cli._common import check_output_dir, non_negative_int, positive_float
+from fuelhm_bench.cli._common import check_output_dir, flight_minutes, non_negative_int, positive_float
+from fuelhm_bench.cli._harness import limit_type
 
 
 def register(sub) -> None:
@@ -27,9 +28,9 @@ def register(sub) -> None:
                    help="also run the panel at physics fidelity with this master seed and report how far apart "
                         "the two physics runs are (the noise floor of the comparison; costs a second physics run)")
     p.add_argument("--method-seed", type=non_negative_int, default=0, help="random_state passed to fit")
-    p.add_argument("--timeout", type=positive_float, default=600.0, help="time limit per method run [s]")
+    p.add_argument("--timeout", type=limit_type("wall_s"), default=600.0, help="time limit per method run [s]")
     p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of scored units")
-    p.add_argument("--minutes", type=positive_float, default=None,
+    p.add_argument("--minutes", type=flight_minutes, default=None,
                    help="override the flight duration [min] (quick looks; >= engine start + 1 min)")
     p.add_argument("--cache-dir", default=None,
                    help="cache of simulated flights (default: $FUELHM_BENCH_CACHE or ~/.cache/fuelhm-bench)")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from fuelhm_bench.cli._common import positive_float, progress_bar
-from fuelhm_bench.cli._harness import add_run_options, check_results_dir, limits_from
+from fuelhm_bench.cli._common import flight_minutes, positive_float, progress_bar
+from fuelhm_bench.cli._harness import add_run_options, check_results_dir, limit_type, limits_from
 
 
 def register(sub) -> None:
@@ -21,8 +21,8 @@ def register(sub) -> None:
     p.add_argument("--config", default="leaderboard/methods.yaml", help="leaderboard file")
     p.add_argument("--scale", type=positive_float, default=None, help="override the file's test-fleet scale")
     p.add_argument("--fidelity", choices=("physics", "surrogate"), default=None, help="override the file's fidelity")
-    p.add_argument("--timeout", type=positive_float, default=None, help="override the file's wall-time limit [s]")
-    p.add_argument("--minutes", type=positive_float, default=None,
+    p.add_argument("--timeout", type=limit_type("wall_s"), default=None, help="override the file's wall-time limit [s]")
+    p.add_argument("--minutes", type=flight_minutes, default=None,
                    help="override every scenario's flight duration [min] (quick looks; >= engine start + 1 min)")
     p.add_argument("--out", required=True, help="output directory")
     add_run_options(p)

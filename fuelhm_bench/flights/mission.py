@@ -140,7 +140,7 @@ class MissionProfile:
     Parameters
     ----------
     duration_s : float, default=3600.0
-        Flight duration [s], at least ``start_duration_s + 60``.
+        Flight duration [s], at least ``start_duration_s + 60``, at most 86400 (one day).
     frame_s : float, default=0.01
         Sample (controller frame) period [s].
     start_duration_s : float, default=60.0
@@ -188,7 +188,7 @@ class MissionProfile:
 
     def __post_init__(self) -> None:
         check_fields(self, {
-            "duration_s": POSITIVE,
+            "duration_s": (0.0, 86400.0, False),  # at most one day (a scenario's duration_min <= 1440)
             "frame_s": (1e-4, 1.0, True),
             "start_duration_s": (20.0, 600.0, True),
             "sweep_low_m": NON_NEGATIVE,

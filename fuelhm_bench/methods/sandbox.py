@@ -96,9 +96,10 @@ class Limits:
             value = getattr(self, name)
             if name == "cpu_s" and value is None:
                 continue
+            high = LIMIT_MAX[name]
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-            if not ok or value < low or (low == 0.0 and value <= 0):
-                bound = f">= {low:g}" if low else "> 0"
+            if not ok or value < low or (low == 0.0 and value <= 0) or value > high:
+                bound = f"in [{low:g}, {high:g}]" if low else f"in (0, {high:g}]"
                 raise ParameterError(f"The '{name}' parameter of Limits must be a finite number {bound}. "
                                      f"Got {value!r} instead.")
 
@@ -125,6 +126,11 @@ class Limits:
             except ParameterError as exc:
                 raise ParameterError(f"{owner}: {exc}") from None
         raise ParameterError(f"{owner} must be a mapping of wall_s, cpu_s, memory_mb, log_kb. Got {value!r} instead.")
+
+
+#: Largest value of each limit: 30 days of wall or CPU time, 1 TiB of address space, 1 GiB of log
+#: (beyond these, clocks and ``setrlimit`` overflow; a larger limit means none in practice).
+LIMIT_MAX = {"wall_s": 30 * 86400.0, "cpu_s": 30 * 86400.0, "memory_mb": 1024.0 * 1024.0, "log_kb": 1024.0 * 1024.0}
 
 
 class SealedFailure(Exception):

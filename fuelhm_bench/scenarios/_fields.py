@@ -230,7 +230,7 @@ def field_kinds(cls: type) -> dict[str, FieldKind]:
 
 
 def _fmt(x: float) -> str:
-    return f"{x:g}"
+    return str(x) if isinstance(x, int) else f"{x:g}"  # an int bound exactly (a seed's 2**63 - 1)
 
 
 def range_text(meta: Mapping) -> str:

@@ -75,6 +75,8 @@ MAX_UNITS: int = 10_000
 MAX_FLIGHTS_PER_UNIT: int = 10_000
 #: Upper bound of a flight's duration [min] (24 h).
 MAX_DURATION_MIN: float = 1440.0
+#: Largest seed (a signed 64-bit integer: seeds are stored in the SQLite results store).
+MAX_SEED: int = 2**63 - 1
 #: Run budget without an explicit opt-in [flight-hours, training + scored fleets]; the largest
 #: shipped scenario needs about 470.
 DEFAULT_RUN_BUDGET_FLIGHT_HOURS: float = 2000.0
@@ -566,9 +568,9 @@ class SeedSpec(Spec):
         (SeedSequence([master, 2])).
     """
 
-    master: int = option(ge=0)
-    training: int | None = option(None, ge=0)
-    test: int | None = option(None, ge=0)
+    master: int = option(ge=0, le=MAX_SEED)
+    training: int | None = option(None, ge=0, le=MAX_SEED)
+    test: int | None = option(None, ge=0, le=MAX_SEED)
 
     def _checks(self) -> Iterable[Problem]:
         if self.training_seed == self.test_seed:
