@@ -135,7 +135,7 @@ class PaperMahalanobis(BaseMethod):
     ...                                      random_state=0)
     >>> decisions = method.decide_table(data.units)   # check-0 healthy, the others degrade
     >>> decisions.groupby("unit_id")["alarm"].sum().to_dict()
-    {'check-0': 0, 'check-1': 7, 'check-2': 6}
+    {'check-0': 0, 'check-1': 8, 'check-2': 7}
     >>> decisions.filter(like="guilt_").iloc[-13].idxmax()   # last flight of check-1
     'guilt_null_bias_drift'
     """

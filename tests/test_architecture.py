@@ -13,7 +13,7 @@ PACKAGE = ROOT / "fuelhm_bench"
 
 #: Layers, lowest first. A module may import its own package and packages of strictly lower layers.
 LAYERS = (
-    ("errors", "taxonomy", "_numba_cache"),
+    ("errors", "taxonomy", "_numba_cache", "yamlfiles"),
     ("__init__",),
     ("io", "physics", "indicators", "diagnosis"),
     ("methods",),  # the method interface and its adapters use the diagnosis statistics

@@ -46,9 +46,9 @@ def test_registered_as_baselines():
 def test_calibrated_false_alarms_and_detects_a_shift(cls):
     data = make_check_data(0)
     method = cls(cv=5, quantile=0.9).fit(data.healthy, knowledge=data.knowledge, random_state=0)
-    fresh = data.other_healthy
+    fresh = make_check_data(1).healthy  # new flights of the same healthy population (other_healthy is offset)
     alarms = method.decide_table(fresh)["alarm"].to_numpy()
-    assert alarms.mean() <= 0.35  # about 10 % expected; the check data are small
+    assert alarms.mean() <= 0.3  # about 10 % expected (quantile 0.9); 60 flights (0.07-0.2 measured)
     shifted = fresh.copy()
     x = shifted[list(INDICATOR_NAMES)].to_numpy(dtype=float)
     sd = np.nanstd(data.healthy[list(INDICATOR_NAMES)].to_numpy(dtype=float), axis=0)

@@ -286,7 +286,7 @@ def test_closed_loop_tracks_demand_and_saturates():
     (lambda: ControllerParams(frame_s=0.0), r"frame_s' parameter must be in \[0.0001, 1\]"),
     (lambda: LvdtParams(adc_bits=40), r"adc_bits' parameter must be an integer in \[0, 24\]"),
     (lambda: LvdtParams(noise_std_m=float("nan")), r"must be finite"),
-    (lambda: MissionProfile(duration_s=0.0), r"MissionProfile.duration_s' parameter must be > 0"),
+    (lambda: MissionProfile(duration_s=0.0), r"MissionProfile.duration_s' parameter must be in \(0, 86400\]"),
     (lambda: MissionProfile(duration_s=30.0), r"duration_s' parameter must be >= start_duration_s \+ 60"),
     (lambda: VelocityGainSweep(current_max_a=-0.02), r"current_max_a"),
 ])

@@ -188,7 +188,7 @@ def test_seed_and_scale(cache_dir):
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    ({"seed": -1}, r"'seed' parameter of prepare_evaluation must be an int >= 0"),
+    ({"seed": -1}, r"'seed' parameter of prepare_evaluation must be an int in \[0, "),
     ({"scale": 0.0}, r"'scale' parameter of prepare_evaluation must be a finite number > 0"),
     ({"fidelity": "fast"}, r"'fidelity' parameter .*Got 'fast'"),
     ({"knowledge_size": {"doe_unts": 1}}, r"Did you mean 'doe_units'"),
