@@ -98,3 +98,31 @@ def test_drift_sweep_command(tiny, tmp_path):
     assert main(["drift-sweep", "--method", "fuelhm_bench.methods:RandomMethod", "--scenario", str(tiny),
                  "--parameters", "servovalve.spool_time_constant_s", "--magnitudes", "0.1,0.2",
                  "--out", str(tmp_path / "bad")]) == 2
+
+
+@pytest.mark.parametrize("argv, name", [
+    (["drift-sweep", "--method", "fuelhm_baselines.trivial:NullMethod", "--scenario", "paper_2012", "--parameters",
+      "fluid.supply_rise_at_100pct_pa"], "drift_sweep.md"),
+    (["fidelity", "--scenario", "paper_2012"], "table.md"),
+    (["itl", "--scenario", "paper_2012", "--units", "1", "--minutes", "3", "--healthy-units", "3",
+      "--healthy-flights", "4", "--intensities", "1", "--jobs", "1"], "itl.csv"),  # refused when publishing
+])
+def test_commands_do_not_replace_the_users_files(tmp_path, capsys, argv, name):
+    """itl, fidelity and drift-sweep replaced a same-named file the user had in --out, without --force."""
+    from fuelhm_bench.cli import main
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / name).write_text("the user's notes")
+    code = main([*argv, "--out", str(out)])
+    assert code == 2
+    assert f"already holds {name}, not written by fuelhm-bench" in capsys.readouterr().err
+    assert (out / name).read_text() == "the user's notes"
+
+
+def test_itl_names_its_options_when_the_healthy_fleet_is_too_small(tmp_path, capsys):
+    from fuelhm_bench.cli import main
+
+    assert main(["itl", "--scenario", "paper_2012", "--healthy-units", "2", "--healthy-flights", "2",
+                 "--out", str(tmp_path / "k")]) == 2
+    assert "--healthy-units x --healthy-flights must give at least 11 healthy flights" in capsys.readouterr().err

@@ -6,7 +6,7 @@ import pytest
 
 from fuelhm_bench.cli import main
 from fuelhm_bench.errors import OutputPathError
-from fuelhm_bench.io.outputs import atomic_directory
+from fuelhm_bench.io.outputs import MANIFEST, atomic_directory
 
 
 def test_new_directory_appears_only_on_success(tmp_path):
@@ -18,6 +18,7 @@ def test_new_directory_appears_only_on_success(tmp_path):
         assert not out.exists()
     assert (out / "a.txt").read_text() == "a" and (out / "sub" / "b.csv").read_text() == "b"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no temporary folder left
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "a.txt", "sub"]
 
 
 @pytest.mark.parametrize("error", [KeyboardInterrupt, RuntimeError])
@@ -31,6 +32,7 @@ def test_interrupted_run_publishes_nothing_and_keeps_the_old_content(tmp_path, e
             (tmp / "b.txt").write_text("new")
             raise error()
     assert sorted(p.name for p in out.iterdir()) == ["a.txt"] and (out / "a.txt").read_text() == "old"
+    assert not (out / MANIFEST).exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
     with pytest.raises(error):  # a new folder is not even created
         with atomic_directory(tmp_path / "new") as tmp:
@@ -45,7 +47,7 @@ def test_existing_directory_keeps_other_files_and_refuses_without_force(tmp_path
     (out / "mine.txt").write_text("mine")
     (out / "sub" / "old.csv").write_text("old")
     (out / "a.txt").write_text("old")
-    with atomic_directory(out) as tmp:
+    with atomic_directory(out, force=True) as tmp:  # a.txt and sub/ are the user's: replaced only with force
         (tmp / "a.txt").write_text("new")
         (tmp / "sub").mkdir()
         (tmp / "sub" / "new.csv").write_text("new")
@@ -70,3 +72,25 @@ def test_itl_is_refused_above_the_run_budget_before_any_output(tmp_path, capsys,
            "2940 flights of 30 min is 1470 flight-hours" in err
     assert "above the run budget of 10 flight-hours" in err and "FUELHM_RUN_BUDGET_FLIGHT_HOURS=1470" in err
     assert not out.exists()
+
+
+def test_a_run_again_replaces_its_own_files_but_not_the_users(tmp_path):
+    """Before, a command writing into an existing folder (itl, paper) replaced a same-named file the user
+    had there (their own table.md) without --force; refusing every existing file instead would make a
+    command refuse to refresh its own output."""
+    out = tmp_path / "out"
+    with atomic_directory(out) as tmp:
+        (tmp / "table.md").write_text("run 1")
+    with atomic_directory(out) as tmp:  # the same command again: its own file, no --force needed
+        (tmp / "table.md").write_text("run 2")
+    assert (out / "table.md").read_text() == "run 2"
+    (out / "notes.md").write_text("the user's")
+    with pytest.raises(OutputPathError, match=r"already holds notes.md, not written by fuelhm-bench; refusing to "
+                                              r"replace \(pass --force"):
+        with atomic_directory(out) as tmp:
+            (tmp / "table.md").write_text("run 3")
+            (tmp / "notes.md").write_text("overwritten")
+    assert (out / "notes.md").read_text() == "the user's" and (out / "table.md").read_text() == "run 2"
+    with atomic_directory(out, force=True) as tmp:
+        (tmp / "notes.md").write_text("replaced on purpose")
+    assert (out / "notes.md").read_text() == "replaced on purpose"

@@ -8,6 +8,7 @@ import sys
 
 from fuelhm_bench.cli._common import check_output_dir, non_negative_int, positive_float, positive_int, progress_bar
 from fuelhm_bench.cli._harness import limit_type
+from fuelhm_bench.io.outputs import claim, refuse_foreign
 
 
 def register(sub) -> None:
@@ -35,7 +36,13 @@ def register(sub) -> None:
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenario's master seed")
     p.add_argument("--timeout", type=limit_type("wall_s"), default=600.0, help="time limit per run [s]")
     p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--force", action="store_true",
+                   help="replace files in --out that fuelhm-bench did not write (its own earlier output is "
+                        "replaced without it)")
     p.set_defaults(func=run)
+
+
+OUTPUT_FILES = ("drift_sweep.csv", "drift_summary.csv", "drift_sweep.md", "drift_sweep.json")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.methods.loading import load_method
 
     out = check_output_dir(args.out)
+    refuse_foreign(out, OUTPUT_FILES, force=args.force)
+    claim(out, OUTPUT_FILES)  # (before writing: a failed run leaves nothing of the user's unprotected)
     try:
         magnitudes = tuple(float(x) for x in args.magnitudes.split(","))
     except ValueError:

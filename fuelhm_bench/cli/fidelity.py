@@ -35,6 +35,9 @@ def register(sub) -> None:
     p.add_argument("--cache-dir", default=None,
                    help="cache of simulated flights (default: $FUELHM_BENCH_CACHE or ~/.cache/fuelhm-bench)")
     p.add_argument("--out", required=True, help="output directory (one sub-directory per scenario + table.md)")
+    p.add_argument("--force", action="store_true",
+                   help="replace files in --out that fuelhm-bench did not write (its own earlier output is "
+                        "replaced without it)")
     p.set_defaults(func=run)
 
 
@@ -45,12 +48,19 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.methods.loading import load_method
     from fuelhm_bench.benchmark.fidelity import fidelity_check
 
-    out = check_output_dir(args.out)
+    from fuelhm_bench.datasets.cache import resolve_scenario
+    from fuelhm_bench.io.outputs import claim, refuse_foreign
+
     scenarios = list(args.scenario)
     if "all" in scenarios:
         from fuelhm_bench.scenarios import list_scenarios
 
         scenarios = [s for s in scenarios if s != "all"] + list(list_scenarios())
+    ids = [resolve_scenario(s).id for s in dict.fromkeys(scenarios)]  # every name checked before anything runs
+    out = check_output_dir(args.out)
+    names = ("table.md", "table.csv", *ids)
+    refuse_foreign(out, names, force=args.force)
+    claim(out, names)
     methods = None
     if args.method:
         if len(args.method) < 2:

@@ -28,6 +28,9 @@ def register(sub) -> None:
     p.add_argument("--jobs", type=bounded(int, 1, 1024), default=None,
                    help="processes simulating in parallel (default: every CPU available); results do not depend on it")
     p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--force", action="store_true",
+                   help="replace files in --out that fuelhm-bench did not write (its own earlier output is "
+                        "replaced without it)")
     p.set_defaults(func=run)
 
 
@@ -43,6 +46,13 @@ def run(args: argparse.Namespace) -> int:
     if not all(0.0 < x <= 1.0 for x in intensities):
         raise ParameterError(f"--intensities must be comma-separated numbers in (0, 1]. Got '{args.intensities}' "
                              "instead.")
+    from fuelhm_bench.taxonomy import INDICATOR_NAMES
+
+    needed = len(INDICATOR_NAMES) + 1  # the healthy Gaussian model of the ten indicators
+    if args.healthy_units * args.healthy_flights < needed:
+        raise ParameterError(f"--healthy-units x --healthy-flights must give at least {needed} healthy flights (the "
+                             f"healthy model of {len(INDICATOR_NAMES)} indicators). Got {args.healthy_units} x "
+                             f"{args.healthy_flights} = {args.healthy_units * args.healthy_flights} instead.")
     build = KnowledgeBuild.from_scenario(args.scenario, doe_units=args.units, intensities=intensities,
                                          minutes=args.minutes, healthy_units=args.healthy_units,
                                          healthy_flights=args.healthy_flights, seed=args.seed)
@@ -54,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
                           f"{len(intensities)} intensities) + --healthy-units {args.healthy_units} x "
                           f"--healthy-flights {args.healthy_flights} = {build.n_flights} flights of {minutes:g} min")
     t0 = time.perf_counter()
-    with atomic_directory(args.out) as tmp:  # nothing is published unless every file is written
+    with atomic_directory(args.out, force=args.force) as tmp:  # nothing is published unless every file is written
         with progress_bar(build.n_flights, "ITL design of experiments") as bar:
             result = build_knowledge(build, progress=bar.update, workers=check_workers(args.jobs, "itl"))
         paths = write_knowledge(result, tmp)

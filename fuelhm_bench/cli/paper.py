@@ -24,6 +24,9 @@ def register(sub) -> None:
     p.add_argument("--jobs", type=positive_int, default=None,
                    help="processes simulating in parallel (default: every CPU available); results do not depend on it")
     p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--force", action="store_true",
+                   help="replace files in --out that fuelhm-bench did not write (its own earlier output is "
+                        "replaced without it)")
     p.set_defaults(func=run)
 
 
@@ -36,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     sc = load_scenario(args.scenario)
     workers = check_workers(args.jobs, "--jobs")
-    with atomic_directory(out) as tmp:  # checked now; nothing is published unless every file is written
+    with atomic_directory(out, force=args.force) as tmp:  # checked now; nothing is published unless every file is written
         # Figs. 4, 5 and 8 do not depend on the study: drawn on a core as soon as one is free.
         figures = submit(model_figures, sc.test_fleet_config().mission, tmp, workers=workers)
         with progress_bar(0, "paper study") as bar:

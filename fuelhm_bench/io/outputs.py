@@ -54,8 +54,8 @@ from pathlib import Path
 
 from fuelhm_bench.errors import OutputPathError
 
-__all__ = ["atomic_directory", "atomic_output", "check_output_dir", "check_output_path", "temporary_path",
-           "write_text"]
+__all__ = ["MANIFEST", "atomic_directory", "atomic_output", "check_output_dir", "check_output_path", "claim",
+           "refuse_foreign", "temporary_path", "write_text", "written_by_us"]
 
 
 def _label(option: str | None, what: str, path: Path) -> str:
@@ -168,6 +168,43 @@ def check_output_dir(path: str | os.PathLike[str], *, force: bool = True, names:
     return path
 
 
+#: A folder's record of the entries fuelhm-bench wrote into it (one name per line): those a later run
+#: of a command may replace without ``--force``; anything else there is the user's.
+MANIFEST = ".fuelhm-bench-outputs"
+
+
+def written_by_us(folder: Path) -> set[str]:
+    """Names of the entries of ``folder`` that fuelhm-bench wrote (its :data:`MANIFEST`)."""
+    try:
+        return {line for line in (Path(folder) / MANIFEST).read_text(encoding="utf-8").splitlines() if line}
+    except (OSError, UnicodeDecodeError):
+        return set()
+
+
+def claim(folder: Path, names: Iterable[str]) -> None:
+    """Record ``names`` as written by fuelhm-bench in ``folder`` (atomic rewrite of its :data:`MANIFEST`)."""
+    folder = Path(folder)
+    entries = sorted(written_by_us(folder) | {str(n) for n in names})
+    tmp = temporary_path(folder / MANIFEST)
+    tmp.write_text("".join(f"{n}\n" for n in entries), encoding="utf-8")
+    os.replace(tmp, folder / MANIFEST)
+
+
+def refuse_foreign(folder: Path, names: Iterable[str], *, force: bool, option: str | None = "--out") -> None:
+    """Refuse, unless ``force``, to replace an entry of ``folder`` in ``names`` that fuelhm-bench did not write.
+
+    Output of an earlier run (listed in the folder's :data:`MANIFEST`) is replaced freely: a command
+    run again refreshes its own files. A file of the same name that the user made is not.
+    """
+    folder = Path(folder)
+    ours = written_by_us(folder)
+    foreign = sorted(n for n in names if (folder / n).exists() and n not in ours)
+    if foreign and not force:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise OutputPathError(f"{_label(option, 'output directory', folder)} already holds {shown}, not written by "
+                              f"fuelhm-bench; refusing to replace (pass --force, or choose another {option or 'folder'}).")
+
+
 def temporary_path(path: Path) -> Path:
     """A hidden, unique sibling of ``path`` that keeps its full suffix (``.x.csv.gz``)."""
     return path.with_name(f".tmp-{uuid.uuid4().hex[:12]}-{path.name}")
@@ -244,7 +281,7 @@ def write_text(path: str | os.PathLike[str], text: str, *, force: bool, what: st
 
 
 @contextlib.contextmanager
-def atomic_directory(path: str | os.PathLike[str], *, force: bool = True, names: Iterable[str] = (),
+def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names: Iterable[str] = (),
                      option: str | None = "--out") -> Iterator[Path]:
     """Fill an output directory atomically: yield a temporary sibling, publish its content on success.
 
@@ -255,14 +292,18 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = True, names:
     and files of ``path`` the command did not write are left alone. On any
     exception, ``KeyboardInterrupt`` included, the temporary directory is
     deleted and ``path`` is left as it was: an interrupted run publishes
-    nothing.
+    nothing. The entries published are recorded in the folder's
+    :data:`MANIFEST`: a later run replaces them freely, but an entry of the same
+    name that fuelhm-bench did not write (the user's ``table.md``) is replaced
+    only with ``force``.
 
     Parameters
     ----------
     path : str or path-like
         The output directory.
-    force : bool, default=True
-        Whether files listed in ``names`` that already exist may be replaced.
+    force : bool, default=False
+        Whether existing entries may be replaced: those listed in ``names``,
+        and those fuelhm-bench did not write.
     names : iterable of str, default=()
         Files the command will write; without ``force`` any that exists is refused.
     option : str or None, default="--out"
@@ -294,6 +335,7 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = True, names:
     label = _label(option, "output directory", target)
     if target.exists():
         check_output_dir(target, force=force, names=names, option=option)
+        refuse_foreign(target, names, force=force, option=option)
     else:
         blocker = _blocking_file(target)
         if blocker is not None:
@@ -306,11 +348,14 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = True, names:
         raise OutputPathError(f"Cannot write {label}: {exc.strerror or exc}.") from None
     try:
         yield tmp
+        written = sorted(p.name for p in tmp.iterdir())
         if target.exists():
             check_output_dir(target, force=force, names=names, option=option)  # appeared meanwhile?
+            refuse_foreign(target, written, force=force, option=option)
             _merge(tmp, target)
         else:
             os.replace(tmp, target)
+        claim(target, written)
     except OSError as exc:
         if isinstance(exc, OutputPathError):
             raise
