@@ -112,3 +112,26 @@ def test_store_keys_follow_every_file_of_the_method(tmp_path, monkeypatch):
     assert third[0] == second[0] and third[1] != second[1]
     assert all(t.source_hash for t in plan_tasks(config))
     sys.modules.pop("mypkg", None)
+
+
+def test_an_edited_copy_of_a_scenario_is_another_key(tmp_path):
+    """A copy of paper_2012.yaml with one value changed keeps its name and version; before, it was keyed
+    like the shipped file, so a store holding the shipped run answered for it (reported: 82.1 reused,
+    91.3 for the edited scenario)."""
+    from fuelhm_bench.benchmark.leaderboard import LeaderboardEntry, plan_tasks
+    from fuelhm_bench.scenarios.registry import shipped_scenario_files
+
+    text = shipped_scenario_files()["paper_2012"].read_text()
+    assert "noise_std_um: 3.0" in text
+    copy = tmp_path / "paper_2012.yaml"
+    copy.write_text(text)
+    edited = tmp_path / "edited" / "paper_2012.yaml"
+    edited.parent.mkdir()
+    edited.write_text(text.replace("noise_std_um: 3.0", "noise_std_um: 30.0"))
+
+    def key(scenario):
+        config = LeaderboardConfig((LeaderboardEntry("fuelhm_baselines.trivial:NullMethod"),), (str(scenario),))
+        return plan_tasks(config)[0].key
+
+    assert key("paper_2012") == key(copy)  # the same content, wherever it is read from
+    assert key(edited) != key("paper_2012")

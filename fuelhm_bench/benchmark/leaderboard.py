@@ -177,6 +177,7 @@ def plan_tasks(config: LeaderboardConfig, shared_params: dict | None = None) -> 
     """Every (method setting, scenario, seed) of ``config`` with its content key."""
     from fuelhm_bench import __version__
     from fuelhm_bench.benchmark.store import evaluation_key
+    from fuelhm_bench.datasets.cache import recipe_digest
     from fuelhm_bench.methods.sandbox import source_hash
     from fuelhm_bench.scenarios import load_scenario
 
@@ -185,13 +186,15 @@ def plan_tasks(config: LeaderboardConfig, shared_params: dict | None = None) -> 
     tasks = []
     for scenario in config.scenarios:
         sc = load_scenario(scenario)
+        digest = recipe_digest(sc)  # an edited copy of a shipped file keeps its name and version
         for seed in config.seeds:
             s = int(sc.seeds.master if seed is None else seed)
             fidelity = config.fidelity or sc.fidelity
             for m in config.methods:
                 params = {**dict(m.params), **({"shared": dict(shared)} if shared else {})}
                 key = evaluation_key(method=m.method, params=params, source_hash=hashes[m.method], scenario=sc.id,
-                                     seed=s, fidelity=fidelity, scale=config.scale, package_version=__version__)
+                                     seed=s, fidelity=fidelity, scale=config.scale, package_version=__version__,
+                                     scenario_digest=digest)
                 tasks.append(Task(key, m.method, m.params, shared, scenario, sc.id, s, fidelity, config.scale,
                                   hashes[m.method]))
     return tasks

@@ -9,9 +9,11 @@ table, report and figure of a leaderboard is a view of the store
 
 The key (:func:`evaluation_key`) is the SHA-256 of a canonical JSON of the
 method's entry point, its hyperparameters as typed JSON, the hash of the
-method's source module, the scenario id (name and version), the seed, the
-fidelity, the scale and the package version: a changed method, setting,
-scenario or release is a new key, so a resumed run never reuses a stale result.
+method's code and files, the scenario id (name and version) and the digest of
+the loaded scenario's content, the seed, the fidelity, the scale and the
+package version: a changed method, setting, scenario (even an edited copy
+that keeps its name and version) or release is a new key, so a resumed run
+never reuses a stale result.
 """
 
 from __future__ import annotations
@@ -72,10 +74,10 @@ def typed_json(value) -> str:
 
 
 def evaluation_key(*, method: str, params: dict, source_hash: str, scenario: str, seed, fidelity: str,
-                   scale: float, package_version: str) -> str:
+                   scale: float, package_version: str, scenario_digest: str = "") -> str:
     """SHA-256 (hex) identifying one evaluation (see the module docstring)."""
     blob = typed_json({"method": method, "params": params, "source_hash": source_hash, "scenario": scenario,
-                       "seed": seed, "fidelity": fidelity, "scale": float(scale),
+                       "scenario_digest": scenario_digest, "seed": seed, "fidelity": fidelity, "scale": float(scale),
                        "package_version": package_version})
     return hashlib.sha256(blob.encode()).hexdigest()
 

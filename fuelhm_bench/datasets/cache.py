@@ -305,6 +305,16 @@ def _canonical(value):
     return {"__repr__": f"{type(value).__module__}.{type(value).__qualname__}", "value": repr(value)}
 
 
+def recipe_digest(recipe) -> str:
+    """SHA-256 hex digest of a frozen dataclass's content (every field, classes named, floats exact).
+
+    A loaded scenario's digest tells two scenario files apart that share a name and version
+    (a shipped file copied and edited): the results store keys evaluations on it.
+    """
+    text = json.dumps(_canonical(recipe), sort_keys=True, allow_nan=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def content_key(kind: str, recipe, **params) -> str:
     """SHA-256 hex digest of a product built from ``recipe`` alone (a frozen dataclass such as a
     :class:`~fuelhm_bench.flights.fleet.FleetConfig`), whichever scenario asks for it.
