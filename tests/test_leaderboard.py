@@ -18,7 +18,24 @@ def test_shipped_leaderboard_file_loads():
 
 @pytest.mark.parametrize("text, match", [
     ("methods: [a:B]\nscenario: [x]\n", "unknown key 'scenario'.*Did you mean 'scenarios'"),
-    ("methods: []\nscenarios: [x]\n", "must both be non-empty"),
+    ("methods: []\nscenarios: [x]\n", "'methods' must be a non-empty list"),
+    # each of these was accepted (or a traceback) before
+    ("methods: [{method: a:B, params: {1: 2, a: 3}}]\nscenarios: [x]\n", r"params: hyperparameter names must be "
+                                                                       r"Python names. Got 1"),
+    ("methods: [{method: a:B, parms: {a: 3}}]\nscenarios: [x]\n", r"methods\[0\]: unknown key 'parms'.*Did you "
+                                                                 r"mean 'params'"),
+    ("methods: {a: b}\nscenarios: [x]\n", r"'methods' must be a non-empty list. Got \{'a': 'b'\}"),
+    ("methods: fuelhm_baselines.trivial:NullMethod\nscenarios: [x]\n", r"'methods' must be a non-empty list. Got "
+                                                                        r"'fuelhm_baselines"),
+    ("methods: [a:B, a:B]\nscenarios: [x]\n", r"methods\[1\] repeats an earlier entry \(a:B\)"),
+    ("methods: [a:B]\nscenarios: [x, x]\n", r"scenarios\[1\] repeats an earlier entry \(x\)"),
+    ("methods: [a:B]\nscenarios: [x]\nseeds: 0\n", r"seeds must be a non-empty list .* Got 0"),
+    ("methods: [a:B]\nscenarios: [x]\nseeds: []\n", r"seeds must be a non-empty list .* Got \[\]"),
+    ("methods: [a:B]\nscenarios: [x]\nseeds: false\n", r"seeds must be a non-empty list .* Got False"),
+    ("methods: [a:B]\nscenarios: [x]\nseeds: [1, 1]\n", r"seeds repeats a seed"),
+    ("methods: [a:B]\nscenarios: [x]\nscale: 2\n", r"scale is the fraction .* in \(0, 1\]. Got 2"),
+    ("methods: [a:B]\nscenarios: [x]\nlimits: {wall_s: 5}\n", r"limits.wall_s: the wall-time limit is the file's "
+                                                                r"timeout_s"),
     ("methods: [{method: a:B, params: 3}]\nscenarios: [x]\n", r"methods\[0\].params must be a mapping"),
     ("methods: [a:B\n", r"lb.yaml: not valid YAML \(line 2\)"),
     ("methods: [nocolon]\nscenarios: [x]\n", r"methods\[0\] must look like 'package.module:Class' .* Got 'nocolon'"),

@@ -654,7 +654,7 @@ def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None 
     limits : Limits or dict, optional
         Other resource limits (CPU time, memory, log size).
     progress : callable, optional
-        ``progress(total, description)`` returning a context manager with ``update(n)`` and a
+        ``progress(total=..., desc=...)`` returning a context manager with ``update(n)`` and a
         mutable ``total`` (such as :func:`tqdm.tqdm`); the command line hands its progress bar down.
 
     Returns
@@ -677,7 +677,7 @@ def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None 
                                  f"surrogate fidelity does not have (it draws indicators, not flights): "
                                  f"evaluate it with fidelity='physics'.")
     if progress is not None:
-        with progress(0, "published knowledge") as bar:
+        with progress(total=0, desc="published knowledge") as bar:
             def grow(k: int) -> None:
                 bar.total += k
                 bar.update(k)
@@ -685,8 +685,8 @@ def evaluate(method, scenario, *, fidelity: str | None = None, seed: int | None 
             evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,
                                             flight_minutes=flight_minutes, knowledge_size=knowledge_size,
                                             cache_dir=cache_dir, progress=grow)
-        with progress(evaluation.n_flights, f"{method if isinstance(method, str) else type(method).__name__} on "
-                                            f"{evaluation.scenario.id}") as bar:
+        with progress(total=evaluation.n_flights, desc=f"{method if isinstance(method, str) else type(method).__name__}"
+                                                       f" on {evaluation.scenario.id}") as bar:
             return _refusal_raised(run_in_env(method, evaluation, random_state=random_state, timeout_s=timeout_s,
                                               limits=limits, progress=bar.update))
     evaluation = prepare_evaluation(scenario, fidelity=fidelity, seed=seed, scale=scale,

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from fuelhm_bench.errors import FuelHMError, ParameterError, ScenarioError
+from fuelhm_bench.errors import FuelHMError, ParameterError, ScenarioError, show_value
 
 __all__ = ["LeaderboardConfig", "LeaderboardEntry", "Task", "evaluate_task", "plan_tasks", "run_board"]
 
@@ -94,8 +94,19 @@ class LeaderboardConfig:
                                     + (f" Did you mean '{close[0]}'?" if close else ""))
         from fuelhm_bench.methods.loading import entry_point_problem
 
+        import difflib
+
+        for key in ("methods", "scenarios"):
+            if not isinstance(data.get(key), list) or not data.get(key):
+                raise ScenarioError(f"{path}: '{key}' must be a non-empty list. Got {data.get(key)!r} instead.")
         methods = []
-        for i, m in enumerate(data.get("methods") or []):
+        for i, m in enumerate(data["methods"]):
+            if isinstance(m, dict):
+                for k in m:
+                    if k not in ("method", "params"):
+                        close = difflib.get_close_matches(str(k), ["method", "params"], n=1)
+                        raise ScenarioError(f"{path}: methods[{i}]: unknown key {k!r}. Allowed: method, params."
+                                            + (f" Did you mean '{close[0]}'?" if close else ""))
             spec = m if isinstance(m, str) else m.get("method") if isinstance(m, dict) else None
             if isinstance(spec, str) and (problem := entry_point_problem(spec)) is not None:
                 field = f"methods[{i}]" if isinstance(m, str) else f"methods[{i}].method"
@@ -106,32 +117,57 @@ class LeaderboardConfig:
                 params = m.get("params") or {}
                 if not isinstance(params, dict):
                     raise ScenarioError(f"{path}: methods[{i}].params must be a mapping. Got {params!r} instead.")
+                bad = [k for k in params if not (isinstance(k, str) and k.isidentifier())]
+                if bad:
+                    raise ScenarioError(f"{path}: methods[{i}].params: hyperparameter names must be Python names. "
+                                        f"Got {bad[0]!r} instead.")
                 methods.append(LeaderboardEntry(m["method"], tuple(sorted(params.items()))))
             else:
                 raise ScenarioError(f"{path}: methods[{i}] must be 'module:Class' or {{method: ..., params: ...}}. "
                                     f"Got {m!r} instead.")
-        scenarios = data.get("scenarios") or []
-        if not methods or not scenarios or not isinstance(scenarios, list):
-            raise ScenarioError(f"{path}: 'methods' and 'scenarios' must both be non-empty lists.")
+        scenarios = data["scenarios"]
+        if not all(isinstance(s, str) and s for s in scenarios):
+            raise ScenarioError(f"{path}: scenarios must be names or YAML paths. Got {scenarios!r} instead.")
+        for field, items in (("methods", methods), ("scenarios", scenarios)):
+            seen = set()
+            for i, item in enumerate(items):
+                if repr(item) in seen:
+                    raise ScenarioError(f"{path}: {field}[{i}] repeats an earlier entry ({_entry_text(item)}): it "
+                                        f"would be evaluated and listed twice.")
+                seen.add(repr(item))
         fidelity = data.get("fidelity")
         if fidelity not in (None, "physics", "surrogate"):
             raise ScenarioError(f"{path}: fidelity must be one of physics, surrogate or null. Got {fidelity!r} instead.")
         from fuelhm_bench.scenarios.schema import MAX_SEED
 
-        seeds = data.get("seeds") or [None]
-        if not isinstance(seeds, list) or not all(s is None or (isinstance(s, int) and not isinstance(s, bool)
-                                                                and 0 <= s <= MAX_SEED) for s in seeds):
-            raise ScenarioError(f"{path}: seeds must be a list of integers in [0, {MAX_SEED}] or null. Got {seeds!r} "
-                                f"instead.")
+        seeds = data.get("seeds", [None])
+        if not isinstance(seeds, list) or not seeds or not all(
+                s is None or (isinstance(s, int) and not isinstance(s, bool) and 0 <= s <= MAX_SEED) for s in seeds):
+            raise ScenarioError(f"{path}: seeds must be a non-empty list of integers in [0, {MAX_SEED}] or null (null: "
+                                f"each scenario's own master seed), e.g. [null] or [1, 2]. Got {seeds!r} instead.")
+        if len(set(seeds)) < len(seeds):
+            raise ScenarioError(f"{path}: seeds repeats a seed: {seeds!r}.")
         scale = _number(path, "scale", data.get("scale", 1.0), positive=True)
+        if scale > 1.0:
+            raise ScenarioError(f"{path}: scale is the fraction of each scenario's test units kept, in (0, 1]. Got "
+                                f"{show_value(scale)} instead.")
         timeout = _number(path, "timeout_s", data.get("timeout_s", 900.0), positive=True)
         limits = data.get("limits") or {}
+        if isinstance(limits, dict) and "wall_s" in limits:
+            raise ScenarioError(f"{path}: limits.wall_s: the wall-time limit is the file's timeout_s "
+                                f"(timeout_s: {show_value(limits['wall_s'])}).")
         try:
             Limits.coerce({**limits, "wall_s": timeout} if isinstance(limits, dict) else limits, f"{path}: limits")
         except ParameterError as exc:
             raise ScenarioError(str(exc)) from None
         return cls(tuple(methods), tuple(str(s) for s in scenarios), tuple(seeds), scale, timeout, fidelity,
                    tuple(sorted(limits.items())))
+
+
+def _entry_text(item) -> str:
+    if isinstance(item, LeaderboardEntry):
+        return item.method + (f" with {dict(item.params)}" if item.params else "")
+    return str(item)
 
 
 def _number(path, field: str, value, *, positive: bool) -> float:
@@ -362,7 +398,7 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
     cache_dir : path-like, optional
         Cache of simulated products (must be shared by the workers of a remote cluster).
     progress : callable, optional
-        ``progress(total, description)`` context manager with ``update(n)`` (e.g. :func:`tqdm.tqdm`).
+        ``progress(total=..., desc=...)`` context manager with ``update(n)`` (e.g. :func:`tqdm.tqdm`).
     log : callable
         Receives one line per finished evaluation.
     """
@@ -434,7 +470,7 @@ def _run_local(todo: list[Task], kwargs: dict, done, progress) -> None:
         evaluation = _prepare(prepare_evaluation, scenario, seed, fidelity, scale, kwargs, progress)
         for task in group:
             if progress is not None:
-                with progress(evaluation.n_flights, f"{task.method} on {task.scenario_id}") as bar:
+                with progress(total=evaluation.n_flights, desc=f"{task.method} on {task.scenario_id}") as bar:
                     done(*evaluate_task(task, evaluation=evaluation, progress=bar.update, **kwargs))
             else:
                 done(*evaluate_task(task, evaluation=evaluation, **kwargs))
@@ -448,7 +484,7 @@ def _prepare(prepare_evaluation, scenario, seed, fidelity, scale, kwargs, progre
               "flight_minutes": kwargs["flight_minutes"], "workers": default_workers()}
     if progress is None:
         return prepare_evaluation(scenario, **common)
-    with progress(0, f"data of {Path(str(scenario)).stem} (seed {seed})") as bar:
+    with progress(total=0, desc=f"data of {Path(str(scenario)).stem} (seed {seed})") as bar:
         def grow(n: int) -> None:  # the total is unknown: the cache may answer
             bar.total += n
             bar.update(n)

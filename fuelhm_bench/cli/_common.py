@@ -24,6 +24,18 @@ def positive_int(text: str) -> int:
     return value
 
 
+def scale_fraction(text: str) -> float:
+    """argparse type of ``--scale``: the fraction of a scenario's test units kept, in (0, 1]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a fraction in (0, 1]. Got '{text}' instead.") from None
+    if not 0.0 < value <= 1.0:  # (NaN fails too; above 1 would be capped at the scenario's units)
+        raise argparse.ArgumentTypeError(f"must be a fraction in (0, 1] of the scenario's test units. Got {text} "
+                                         f"instead.")
+    return value
+
+
 def flight_minutes(text: str) -> float:
     """argparse type of ``--minutes`` overriding a scenario's flight duration: a number in (0, 1440] min.
 

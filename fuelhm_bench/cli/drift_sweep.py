@@ -6,7 +6,8 @@ import argparse
 import json
 import sys
 
-from fuelhm_bench.cli._common import check_output_dir, non_negative_int, positive_float, positive_int, progress_bar
+from fuelhm_bench.cli._common import (check_output_dir, non_negative_int, positive_float, positive_int, progress_bar,
+                                      scale_fraction)
 from fuelhm_bench.cli._harness import limit_type
 from fuelhm_bench.io.outputs import claim, refuse_foreign
 
@@ -31,7 +32,7 @@ def register(sub) -> None:
                    help="relative: x (1 + m); absolute: + m in SI units (default relative)")
     p.add_argument("--tolerance", type=positive_float, default=0.05,
                    help="degradation threshold: a rise of FPR or FNR by more than this (default 0.05)")
-    p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of scored units")
+    p.add_argument("--scale", type=scale_fraction, default=1.0, help="fraction of the scored units kept, in (0, 1]")
     p.add_argument("--doe-units", type=positive_int, default=6, help="units of the ITL design (default 6)")
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenario's master seed")
     p.add_argument("--timeout", type=limit_type("wall_s"), default=600.0, help="time limit per run [s]")

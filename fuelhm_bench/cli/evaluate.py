@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fuelhm_bench.cli._common import flight_minutes, non_negative_int, positive_float, progress_bar
+from fuelhm_bench.cli._common import flight_minutes, non_negative_int, progress_bar, scale_fraction
 from fuelhm_bench.cli._harness import add_run_options, check_results_dir, limit_type, limits_from
 
 
@@ -31,8 +31,11 @@ def register(sub) -> None:
                    help="simulation of the scored flights: physics (simulator + on-board extraction) or surrogate "
                         "(healthy Gaussian draws + ITL shifts, much faster); default: the scenario's")
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenario's master seed")
-    p.add_argument("--timeout", type=limit_type("wall_s"), default=600.0, help="wall-time limit per method [s] (default 600)")
-    p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of test units (extended until every mode of the fleet is represented)")
+    p.add_argument("--timeout", type=limit_type("wall_s"), default=600.0,
+                   help="wall-time limit per method [s] (default 600)")
+    p.add_argument("--scale", type=scale_fraction, default=1.0,
+                   help="fraction of the scenario's test units kept, in (0, 1] (extended until every mode of the "
+                        "fleet is represented)")
     p.add_argument("--minutes", type=flight_minutes, default=None,
                    help="override the flight duration [min] (quick looks; >= engine start + 1 min)")
     p.add_argument("--out", required=True, help="output directory")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from fuelhm_bench.cli._common import flight_minutes, non_negative_int, positive_float
+from fuelhm_bench.cli._common import flight_minutes, non_negative_int, scale_fraction
 
 
 def register(sub) -> None:
@@ -28,7 +28,7 @@ def add_scenario_options(p) -> None:
     p.add_argument("--fidelity", choices=("physics", "surrogate"), default=None,
                    help="simulation of the scored flights; default: the scenario's")
     p.add_argument("--seed", type=non_negative_int, default=None, help="override the scenario's master seed")
-    p.add_argument("--scale", type=positive_float, default=1.0,
+    p.add_argument("--scale", type=scale_fraction, default=1.0,
                    help="multiply the number of test units (extended until every mode is represented)")
     p.add_argument("--minutes", type=flight_minutes, default=None, help="override the flight duration [min]")
     p.add_argument("--cache-dir", default=None, help="cache of simulated products")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fuelhm_bench.cli._common import check_output_dir, flight_minutes, non_negative_int, positive_float
+from fuelhm_bench.cli._common import check_output_dir, flight_minutes, non_negative_int, scale_fraction
 from fuelhm_bench.cli._harness import limit_type
 
 
@@ -29,7 +29,7 @@ def register(sub) -> None:
                         "the two physics runs are (the noise floor of the comparison; costs a second physics run)")
     p.add_argument("--method-seed", type=non_negative_int, default=0, help="random_state passed to fit")
     p.add_argument("--timeout", type=limit_type("wall_s"), default=600.0, help="time limit per method run [s]")
-    p.add_argument("--scale", type=positive_float, default=1.0, help="multiply the number of scored units")
+    p.add_argument("--scale", type=scale_fraction, default=1.0, help="fraction of the scored units kept, in (0, 1]")
     p.add_argument("--minutes", type=flight_minutes, default=None,
                    help="override the flight duration [min] (quick looks; >= engine start + 1 min)")
     p.add_argument("--cache-dir", default=None,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from fuelhm_bench.cli._common import flight_minutes, positive_float, progress_bar
+from fuelhm_bench.cli._common import flight_minutes, progress_bar, scale_fraction
 from fuelhm_bench.cli._harness import add_run_options, check_results_dir, limit_type, limits_from
 
 
@@ -19,7 +19,7 @@ def register(sub) -> None:
                                    "status 3 when an entry did not finish ok (its row says why; every other result "
                                    "is kept and the views are written).")
     p.add_argument("--config", default="leaderboard/methods.yaml", help="leaderboard file")
-    p.add_argument("--scale", type=positive_float, default=None, help="override the file's test-fleet scale")
+    p.add_argument("--scale", type=scale_fraction, default=None, help="override the file's test-fleet scale")
     p.add_argument("--fidelity", choices=("physics", "surrogate"), default=None, help="override the file's fidelity")
     p.add_argument("--timeout", type=limit_type("wall_s"), default=None, help="override the file's wall-time limit [s]")
     p.add_argument("--minutes", type=flight_minutes, default=None,

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fuelhm_bench.cli._common import atomic_directory, positive_float, positive_int, progress_bar
+from fuelhm_bench.cli._common import atomic_directory, positive_int, progress_bar, scale_fraction
 
 
 def register(sub) -> None:
@@ -18,7 +18,7 @@ def register(sub) -> None:
                                    "report.md to --out.")
     p.add_argument("--scenario", default="paper_2012", help="scenario name or YAML file (default paper_2012)")
     p.add_argument("--doe-units", type=positive_int, default=8, help="units of the ITL design of experiments")
-    p.add_argument("--scale", type=positive_float, default=1.0,
+    p.add_argument("--scale", type=scale_fraction, default=1.0,
                    help="shrink the fleets (e.g. 0.2 for a quick look); 1 = the scenario as written")
     p.add_argument("--cache-dir", default=None, help="cache of simulated knowledge and flights")
     p.add_argument("--jobs", type=positive_int, default=None,
