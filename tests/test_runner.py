@@ -241,3 +241,17 @@ def test_readme_example_runs_on_a_custom_scenario(tmp_path, monkeypatch, capsys)
     out = capsys.readouterr().out
     assert out.startswith("ok") and "cost_kusd" in out
     assert len(README_EXAMPLE.strip().splitlines()) <= 16
+
+
+def test_a_duration_override_is_held_to_the_run_budget(monkeypatch):
+    """``--minutes`` / ``flight_minutes`` bypassed the run budget a scenario file is held to (a 1440-minute
+    override of paper_2012 started a 31,000 flight-hour run without a word)."""
+    monkeypatch.delenv("FUELHM_RUN_BUDGET_FLIGHT_HOURS", raising=False)
+    with pytest.raises(ParameterError, match=r"1300 flights of 1440 min of scenario paper_2012-v3 are 3.12e\+04 "
+                                             r"flight-hours, over the run budget of 2000"):
+        prepare_evaluation("paper_2012", fidelity="surrogate", flight_minutes=1440)
+    monkeypatch.setenv("FUELHM_RUN_BUDGET_FLIGHT_HOURS", "40000")  # raised on purpose: the override is allowed
+    from fuelhm_bench.datasets.cache import _check_minutes
+    from fuelhm_bench.scenarios import load_scenario
+
+    _check_minutes(1440, "x", load_scenario("paper_2012"))

@@ -215,11 +215,29 @@ def resolve_scenario(scenario: object):
                          f"Got {type(scenario).__name__} instead.")
 
 
-def _check_minutes(flight_minutes, owner: str) -> None:
+def _check_minutes(flight_minutes, owner: str, sc=None) -> None:
+    """Refuse a flight-duration override that is not a number, or that takes a run of ``sc`` past its budget.
+
+    A scenario file's own duration is checked against the run budget when it is loaded; an override
+    (``--minutes``) must be too, or a 1440-minute override of a 20-minute scenario starts a run of
+    thousands of flight-hours without a word.
+    """
     if flight_minutes is not None and not (isinstance(flight_minutes, (int, float)) and not isinstance(
             flight_minutes, bool) and math.isfinite(flight_minutes)):
         raise ParameterError(f"The 'flight_minutes' parameter of {owner} must be a finite number or None. "
                              f"Got {flight_minutes!r} instead.")
+    if flight_minutes is None or sc is None:
+        return
+    from fuelhm_bench.scenarios.schema import run_budget
+
+    flights = sc.fleet.units * sc.fleet.flights_per_unit + sc.training.units * sc.training.flights_per_unit
+    hours = flights * float(flight_minutes) / 60.0
+    budget, origin = run_budget(sc.run_budget_flight_hours)
+    if hours > budget:
+        raise ParameterError(f"The 'flight_minutes' parameter of {owner}: {flights} flights of {flight_minutes:g} min "
+                             f"of scenario {sc.id} are {hours:.4g} flight-hours, over the run budget of {budget:g} "
+                             f"({origin}). Choose shorter flights, or raise the budget (run_budget_flight_hours in "
+                             f"the scenario file or the environment variable FUELHM_RUN_BUDGET_FLIGHT_HOURS).")
 
 
 def _with_minutes(config, flight_minutes: float | None):
@@ -504,7 +522,7 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     from fuelhm_bench.datasets.knowledge import build_knowledge
 
     sc = resolve_scenario(scenario)
-    _check_minutes(flight_minutes, "published_knowledge")
+    _check_minutes(flight_minutes, "published_knowledge", sc)
     size = KnowledgeSize() if size is None else size
     params = {"doe_units": size.doe_units, "doe_intensities": list(size.doe_intensities),
               "healthy_units": size.healthy_units, "healthy_flights": size.healthy_flights}
@@ -552,7 +570,7 @@ def training_indicators(scenario, *, flight_minutes: float | None = None, units:
         The table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
     """
     sc = resolve_scenario(scenario)
-    _check_minutes(flight_minutes, "training_indicators")
+    _check_minutes(flight_minutes, "training_indicators", sc)
     config = _with_minutes(sc.training_fleet_config(), flight_minutes)
     units = config.n_units if units is None else units
     flights = config.n_flights if flights is None else flights
@@ -592,7 +610,7 @@ def scored_indicators(scenario, *, flight_minutes: float | None = None, units: i
         The indicator table of :func:`fuelhm_bench.datasets.fleet_indicators` (a copy).
     """
     sc = resolve_scenario(scenario)
-    _check_minutes(flight_minutes, "scored_indicators")
+    _check_minutes(flight_minutes, "scored_indicators", sc)
     config = _with_minutes(sc.test_fleet_config(), flight_minutes)
     units = config.n_units if units is None else units
     drifted = bool(drifted) or not sc.drift
@@ -650,7 +668,7 @@ def surrogate_doe(scenario, *, flight_minutes: float | None = None, size: Knowle
     from fuelhm_bench.physics.model import manufacture
 
     sc = resolve_scenario(scenario)
-    _check_minutes(flight_minutes, "surrogate_doe")
+    _check_minutes(flight_minutes, "surrogate_doe", sc)
     size = KnowledgeSize() if size is None else size
     doe = _surrogate_design(sc, flight_minutes, size, drifted)
     params = {"units": size.surrogate_doe_units, "intensities": list(size.surrogate_doe_intensities),
@@ -726,7 +744,7 @@ def surrogate_healthy(scenario, *, flight_minutes: float | None = None, size: Kn
     from fuelhm_bench.flights.fleet import build_units
 
     sc = resolve_scenario(scenario)
-    _check_minutes(flight_minutes, "surrogate_healthy")
+    _check_minutes(flight_minutes, "surrogate_healthy", sc)
     size = KnowledgeSize() if size is None else size
     config = _with_minutes(sc.test_fleet_config(), flight_minutes)
     drifted = bool(drifted) and bool(sc.drift)
