@@ -201,3 +201,22 @@ def test_to_dict_round_trip_in_python():
 def test_errors_are_scenario_errors():
     with pytest.raises(ScenarioError):
         dataclasses.replace(BASE, fidelity="quantum")
+
+
+@pytest.mark.parametrize("old, new, match", [
+    ("sweep_high_mm: 57.0", "sweep_high_mm: 500.0", r":\d+: mission.sweep_high_mm must be < the model's stroke "
+                                                   r"\(60 mm\)"),
+    ("frame_rate_hz: 100.0", "frame_rate_hz: 7.0", r":\d+: mission.frame_rate_hz must be a number in \[20, 10000\]"),
+])
+def test_scenarios_that_could_not_produce_indicators_are_refused(tmp_path, old, new, match):
+    """Both validated before, then failed in evaluate with "HealthyModel needs at least 11 healthy flights"
+    (no valid indicator: the rod held on its end stop; no idle samples at 7 Hz), naming neither file nor field."""
+    from fuelhm_bench.scenarios import load_scenario
+    from fuelhm_bench.scenarios.registry import shipped_scenario_files
+
+    text = shipped_scenario_files()["paper_2012"].read_text()
+    assert old in text
+    path = tmp_path / "paper_2012.yaml"
+    path.write_text(text.replace(old, new))
+    with pytest.raises(ScenarioError, match=match):
+        load_scenario(path)
