@@ -63,6 +63,10 @@ def test_simulate_effect_and_frame_rate(tmp_path):
     (["--effect", "rod_fricton"], "Did you mean 'rod_friction'"),
     (["--effect", "rod_friction:coulomb_n=-1"], "coulomb_n"),
     (["--onset", "5-2"], "--onset must be MIN-MAX"),
+    # each was accepted before: labels with two schedules of one mode, an effect silently replaced, an onset unused
+    (["--degrade", "backlash:0.2", "--degrade", "backlash:0.9"], "--degrade backlash is given twice"),
+    (["--effect", "rod_friction:coulomb_n=100", "--effect", "rod_friction"], "--effect rod_friction is given twice"),
+    (["--onset", "0-0"], "--onset 0-0 applies to the degradations of --degrade, and none is given"),
 ])
 def test_simulate_bad_input_is_one_clean_line(tmp_path, capsys, args, message):
     code = main(["simulate", "--units", "1", "--flights", "1", "--minutes", "2", *args, "--out", str(tmp_path / "x.parquet")])

@@ -44,6 +44,7 @@ def model_from_args(args: argparse.Namespace):
     from fuelhm_bench.errors import FuelHMError
 
     model = load_model(args.model) if args.model else LoopModel()
+    given: dict[str, str] = {}
     for spec in args.effect:
         try:
             effect = parse_effect_spec(spec)
@@ -51,6 +52,10 @@ def model_from_args(args: argparse.Namespace):
             reason = str(exc).removeprefix(f"Effect spec '{spec}': ")
             raise ParameterError(f"--effect {spec!r}: {reason} The form is ID[:PARAM=VALUE,...], e.g. "
                                  "rod_friction:coulomb_n=200.") from None
+        if effect.id in given:  # (one would silently replace the other)
+            raise ParameterError(f"--effect {effect.id} is given twice ({given[effect.id]!r} and {spec!r}); give each "
+                                 f"effect once, with all its parameters: ID:PARAM=VALUE,PARAM=VALUE.")
+        given[effect.id] = spec
         model = model.with_effect(effect)
     if args.frame_rate is not None:
         model = model.with_parameters({"controller.frame_s": 1.0 / args.frame_rate})
@@ -99,7 +104,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=non_negative_int, default=0, help="master seed (default 0)")
     p.add_argument("--degrade", action="append", default=[], metavar="MODE:INTENSITY",
                    help="degradation with its maximum intensity in [0, 1] (repeatable)")
-    p.add_argument("--onset", default="0-0", metavar="MIN-MAX",
+    p.add_argument("--onset", default=None, metavar="MIN-MAX",
                    help="onset flight of the degradations, drawn uniformly per unit (default 0-0: from the first flight)")
     p.add_argument("--growth", choices=("step", "linear", "exponential"), default="step",
                    help="growth law from the onset (default step)")
@@ -133,7 +138,10 @@ def run(args: argparse.Namespace) -> int:
     # Option checks first: a misuse is refused before the simulator is loaded.
     check_run_budget(args.units, args.flights, args.minutes,
                      args.frame_rate if args.frame_rate is not None else 100.0)
-    onset_min, onset_max = parse_onset(args.onset, args.flights) if args.degrade else parse_onset(args.onset)
+    onset = "0-0" if args.onset is None else args.onset
+    onset_min, onset_max = parse_onset(onset, args.flights) if args.degrade else parse_onset(onset)
+    if not args.degrade and args.onset is not None:
+        raise ParameterError(f"--onset {args.onset} applies to the degradations of --degrade, and none is given.")
 
     from fuelhm_bench.flights.fleet import FleetConfig, build_units, flights_frame, iter_flights, labels_frame
     from fuelhm_bench.flights.mission import MissionProfile
@@ -142,9 +150,12 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.physics.model import Dispersion
 
     model = model_from_args(args)
-    schedules = []
+    schedules, seen = [], {}
     for spec in args.degrade:
         mode, f = parse_degrade(spec)
+        if mode in seen:  # (the labels would hold both schedules of one mode)
+            raise ParameterError(f"--degrade {mode} is given twice ({seen[mode]!r} and {spec!r}); give each mode once.")
+        seen[mode] = spec
         if f > 0:
             schedules.append(ModeSchedule(mode, 1.0, onset_min, onset_max, args.growth, args.ramp_flights, f))
     mission = MissionProfile(duration_s=args.minutes * 60.0, frame_s=model.controller.frame_s)
