@@ -105,11 +105,13 @@ def test_a_panel_needs_two_methods():
         fidelity_check("paper_2012", methods={"null": NullMethod()})
 
 
-def test_cli_rejects_a_single_method(tmp_path, capsys):
-    code = main(["fidelity", "--scenario", "paper_2012", "--method", "fuelhm_baselines.trivial:NullMethod",
+@pytest.mark.parametrize("methods", [["fuelhm_baselines.trivial:NullMethod"],
+                                     ["fuelhm_baselines.trivial:NullMethod"] * 2])  # the same one twice
+def test_cli_rejects_a_single_method(tmp_path, capsys, methods):
+    code = main(["fidelity", "--scenario", "paper_2012", *[a for m in methods for a in ("--method", m)],
                  "--out", str(tmp_path / "o")])
     assert code == 2
-    assert "--method must be given at least twice" in capsys.readouterr().err
+    assert "--method must name at least two different methods" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -827,3 +827,26 @@ def test_flight_writer_unwritable_directory(tmp_path):
     with pytest.raises(OutputPathError, match="cannot create its directory") as info:
         FlightWriter(blocker / "sub" / "f.parquet")
     assert "f.parquet" in str(info.value)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_repeated_column_name_is_refused_naming_it(tmp_path, suffix):
+    """Before: the CSV was read with pandas' silent 'time_s.1' rename, the Parquet file failed with a
+    multi-line Arrow schema dump."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from fuelhm_bench.errors import DataFormatError
+    from fuelhm_bench.io.tables import read_table
+
+    path = tmp_path / f"dup{suffix}"
+    if suffix == ".csv":
+        path.write_text("flight_id,time_s,current_mA,position_mm,time_s\n0,0.0,1.0,2.0,0.0\n")
+    else:
+        pq.write_table(pa.Table.from_arrays([pa.array([0]), pa.array([0.0]), pa.array([1.0]), pa.array([2.0]),
+                                             pa.array([0.0])],
+                                            names=["flight_id", "time_s", "current_mA", "position_mm", "time_s"]),
+                       path)
+    with pytest.raises(DataFormatError, match=r"^'.*dup\.\w+': column names must be unique. Got 'time_s' more "
+                                              r"than once\.$"):
+        read_table(path)

@@ -182,6 +182,7 @@ def run_drift_sweep(method, scenario, sweep: DriftSweep | None = None, *, scale:
     for key, spec in specs:  # fail before simulating anything
         try:
             spec.apply(truth)
+            dataclasses.replace(sc, drift=(spec,))  # the scenario's own drift rules (no degradation parameter)
         except FuelHMError as exc:
             raise ParameterError(f"DriftSweep cannot drift {key[0]} by {key[1]:g} ({sweep.change}): {exc}") from None
     common = {"fidelity": "physics", "seed": seed, "scale": scale, "robustness": False,

@@ -259,9 +259,9 @@ def check_excitation(sets: dict, what: str, *, min_moving: int = 200, min_span_m
         n_mov = int(np.count_nonzero(mov))
         span = float(np.ptp(rs.i_ma[mov])) if n_mov else 0.0
         if n_mov < min_moving or span < min_span_ma:
-            unit = "the flights" if k == NO_UNIT else f"unit {k!r}"
+            unit = "" if k == NO_UNIT else f" of unit {k!r}"
             raise DataFormatError(
-                f"Not enough excitation in {what} of {unit}: {n_mov} moving samples (|v| >= "
+                f"Not enough excitation in {what}{unit}: {n_mov} moving samples (|v| >= "
                 f"{rs.config.moving_velocity_mm_s:g} mm/s or a changing current) spanning {span:.2f} mA of current. "
                 f"The recalibration needs at least {min_moving} moving samples spanning at least {min_span_ma:g} mA "
                 "(transients: the engine-start test sweep, throttle steps); a flight holding the actuator still "

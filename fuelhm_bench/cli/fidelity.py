@@ -63,8 +63,8 @@ def run(args: argparse.Namespace) -> int:
     claim(out, names)
     methods = None
     if args.method:
-        if len(args.method) < 2:
-            raise ParameterError(f"--method must be given at least twice (a ranking needs two methods). "
+        if len(set(args.method)) < 2:
+            raise ParameterError(f"--method must name at least two different methods (a ranking needs two). "
                                  f"Got {args.method} instead.")
         methods = {spec.rpartition(":")[2] if args.method.count(spec) == 1 else spec: load_method(spec)
                    for spec in dict.fromkeys(args.method)}

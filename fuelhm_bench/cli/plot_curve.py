@@ -55,6 +55,17 @@ def _load(path):
 
 def _curve(f, source, annotate):
     """Raw points, smoothed curve and indicators of one flight; refuses a flight with nothing to draw."""
+    from fuelhm_bench.errors import FuelHMError
+
+    try:
+        return _curve_of(f, source, annotate)
+    except FuelHMError as exc:  # an extraction error names the flight, not the file it came from
+        if str(source) in str(exc):
+            raise
+        raise type(exc)(f"{source}: {exc}") from None
+
+
+def _curve_of(f, source, annotate):
     from fuelhm_bench.cli._common import extraction_config
     from fuelhm_bench.indicators import extract_indicators, velocity_gain_curve, velocity_points
 

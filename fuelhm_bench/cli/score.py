@@ -35,8 +35,16 @@ def run(args: argparse.Namespace) -> int:
         from fuelhm_bench.cli._common import check_output_dir
         from fuelhm_bench.scoring import write_tables
 
+        from fuelhm_bench.errors import OutputPathError
+
         out = check_output_dir(args.out)
         tables = {**card.tables(), "headline_intervals": ci.reset_index()}
-        write_tables(tables, out, overwrite=args.force)
+        try:
+            write_tables(tables, out, overwrite=args.force)
+        except OutputPathError as exc:
+            if args.force:
+                raise
+            raise OutputPathError(f"--out {out} already holds this command's tables; refusing to overwrite them "
+                                  f"(pass --force, or choose another --out). {exc}") from None
         print(f"tables: {out}")
     return 0

@@ -148,6 +148,8 @@ def read_table(
             frame = _read_csv(path, compressed=fmt == "csv.gz", dtypes=csv_dtypes or {})
     except pd.errors.EmptyDataError as exc:
         raise DataFormatError(f"The {what} '{path}' is empty: it has no header line.") from exc
+    except DataFormatError:
+        raise
     except _READ_ERRORS as exc:
         raise DataFormatError(
             f"Cannot read the {what} '{path}' as {fmt}: {type(exc).__name__}: {exc}"
@@ -155,7 +157,20 @@ def read_table(
     return frame
 
 
+def _duplicate_columns(names) -> list[str]:
+    seen, dup = set(), []
+    for n in names:
+        if n in seen and n not in dup:
+            dup.append(n)
+        seen.add(n)
+    return dup
+
+
 def _read_parquet(path: Path) -> pd.DataFrame:
+    dup = _duplicate_columns(pq.read_schema(path).names)
+    if dup:
+        raise DataFormatError(f"'{path}': column names must be unique. Got {', '.join(map(repr, dup))} "
+                              f"more than once.")
     frame = pq.read_table(path).to_pandas()
     if any(name is not None for name in frame.index.names):
         return frame.reset_index()
@@ -163,6 +178,11 @@ def _read_parquet(path: Path) -> pd.DataFrame:
 
 
 def _read_csv(path: Path, *, compressed: bool, dtypes: dict[str, str]) -> pd.DataFrame:
+    header = pd.read_csv(path, compression="gzip" if compressed else None, nrows=1, header=None, dtype=str)
+    dup = _duplicate_columns(str(v) for v in header.iloc[0]) if len(header) else []
+    if dup:  # (pandas would rename the second one 'name.1' without a word)
+        raise DataFormatError(f"'{path}': column names must be unique. Got {', '.join(map(repr, dup))} "
+                              f"more than once.")
     return pd.read_csv(
         path,
         compression="gzip" if compressed else None,
