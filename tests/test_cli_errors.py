@@ -51,6 +51,7 @@ def run(capsys, *argv) -> tuple[int, str]:
     (["sweep", "--n2-pct", "500"], "error: --n2-pct must be in [30, 110] %. Got 500 instead."),
     (["sweep", "--min-ma", "5", "--max-ma", "1"], "error: --max-ma must be > --min-ma (5 mA). Got 1 instead."),
     (["sweep", "--cycles", "100", "--ramp-seconds", "3600"], "error: --cycles 100 x 2 x --ramp-seconds 3600"),
+    (["sweep", "--noise-um", "5", "--seed", "3"], "error: --noise-um, --seed: a sweep records the true rod position"),
     (["itl", "--intensities", "0.5,abc"], "error: --intensities must be comma-separated numbers in (0, 1]."),
     (["discrepancy", "f.parquet", "--candidates", "rod_frction"], "error: --candidates: unknown effect "
                                                                   "'rod_frction'."),

@@ -29,7 +29,8 @@ def register(sub) -> None:
     p.add_argument("--n2-pct", type=positive_float, default=82.0, help="engine speed, sets supply pressure [%%]")
     p.add_argument("--degrade", action="append", default=[], metavar="MODE:INTENSITY",
                    help="degradation intensity in [0, 1] (repeatable)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="noise seed (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=None,
+                   help="not used: the sweep file records the true rod position (refused when given)")
     add_model_arguments(p)
     p.add_argument("--force", action="store_true", help="overwrite the output file")
     p.add_argument("--out", required=True, help="output file (.parquet, .csv or .csv.gz)")
@@ -50,13 +51,19 @@ def run(args: argparse.Namespace) -> int:
                              f"{MAX_SAMPLES:.0e} samples (shorter ramps or fewer cycles).")
     if args.max_ma <= args.min_ma:
         raise ParameterError(f"--max-ma must be > --min-ma ({args.min_ma:g} mA). Got {args.max_ma:g} instead.")
+    unused = [opt for opt, value in (("--noise-um", args.noise_um), ("--adc-bits", args.adc_bits),
+                                     ("--seed", args.seed)) if value is not None]
+    if unused:  # they would be accepted and change nothing
+        raise ParameterError(f"{', '.join(unused)}: a sweep records the true rod position (a virtual bench without "
+                             f"the LVDT), so the sensor's noise, resolution and noise seed do not apply; leave "
+                             f"{'it' if len(unused) == 1 else 'them'} out.")
     model = model_from_args(args)
     model = model.degraded(dict(parse_degrade(s) for s in args.degrade))
     sweep = VelocityGainSweep(current_min_a=args.min_ma * 1e-3, current_max_a=args.max_ma * 1e-3,
                               ramp_duration_s=args.ramp_seconds, n2_frac=args.n2_pct / 100.0,
                               frame_s=model.controller.frame_s, cycles=args.cycles)
     out_path = check_output(args.out, force=args.force)
-    res = run_sweep(model, sweep, seed=args.seed)
+    res = run_sweep(model, sweep, seed=0)  # (the seed only draws the LVDT noise, which the file does not carry)
     out = res.output
     n = len(out.time_s)
     frame = pd.DataFrame({
