@@ -228,7 +228,7 @@ def test_output_folder_without_store_is_not_overwritten(board_config, tmp_path, 
     ("scale: fast\n", r"scale must be a finite number > 0. Got 'fast' instead"),
     ("scale: -1\n", r"scale must be a finite number > 0. Got -1 instead"),
     ("timeout_s: .inf\n", r"timeout_s must be a finite number > 0"),
-    ("seeds: [x]\n", r"seeds must be a list of integers"),
+    ("seeds: [x]\n", r"seeds must be a non-empty list of integers"),
     ("limits: {memory_mb: 10}\n", r"limits: The 'memory_mb' parameter of Limits must be"),
     ("limits: {cpu: 10}\n", r"limits: unknown limit 'cpu'"),
 ])

@@ -327,8 +327,8 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names
     ...     _ = (tmp / "a.txt").write_text("hello")
     ...     d.exists()
     False
-    >>> sorted(p.name for p in d.iterdir())
-    ['a.txt']
+    >>> sorted(p.name for p in d.iterdir())  # and the record of what fuelhm-bench wrote there
+    ['.fuelhm-bench-outputs', 'a.txt']
     """
     target = Path(path)
     names = tuple(names)
