@@ -285,6 +285,9 @@ def evaluate_task(task: Task, *, limits: dict, method_seed: int = 0, cache_dir=N
                 else:
                     message = f"robustness not measured: nominal run {nom.status}: {nom.message}"
             kpis = {k: (None if v != v else float(v)) for k, v in kp.items()}
+            if kpis.get("summary_score") is None and not message:
+                message = ("summary score undefined: no scored flight is faulty (a scenario without a degradation "
+                           "that occurs measures false alarms only)")
         except FuelHMError as exc:
             status, message, tables = "invalid", f"{task.method}: its output cannot be scored: {exc}", {}
     record = {"key": task.key, "method": task.method,
@@ -432,7 +435,7 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
             score = record["kpis"].get("summary_score") if record["kpis"] else None
             log(f"{record['scenario']} seed {record['seed']}: {record['method']} {dict(record['params']) or ''}: "
                 f"{record['status']}" + (f" (summary score {score:.3g})" if score is not None else "")
-                + (f": {first}" if first and record["status"] != "ok" else "")
+                + (f": {first}" if first else "")
                 + f" [{record['seconds']:.1f} s]")
 
         if todo:
