@@ -49,10 +49,16 @@ def test_a_method_without_base_class_loads_by_entry_point(tmp_path, monkeypatch)
         "    def fit(self, healthy, *, knowledge=None, raw_flights=None, random_state=None):\n        return self\n"
         "    def start_unit(self, unit_id):\n        pass\n"
         "    def decide(self, row, *, raw=None):\n        return Decision(0.0, False)\n"
-        "    def decide_unit(self, table, *, raw=None):\n        raise NotImplementedError\n")
+        "    def decide_unit(self, table, *, raw=None):\n"
+        "        from fuelhm_bench.methods.base import run_unit\n        return run_unit(self, table)\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     method = load_method("duck_method:Duck", {"a": 2.0})
     assert type(method).__name__ == "Duck" and method.a == 2.0
+    from fuelhm_bench.methods import make_check_data
+
+    units = make_check_data(0).units
+    decisions = method.fit(units).decide_unit(units[units["unit_id"] == "check-0"])
+    assert len(decisions) == 12 and not decisions["alarm"].any()
 
 
 @pytest.mark.parametrize("item, match", [

@@ -24,35 +24,6 @@ def positive_int(text: str) -> int:
     return value
 
 
-def scale_fraction(text: str) -> float:
-    """argparse type of ``--scale``: the fraction of a scenario's test units kept, in (0, 1]."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a fraction in (0, 1]. Got '{text}' instead.") from None
-    if not 0.0 < value <= 1.0:  # (NaN fails too; above 1 would be capped at the scenario's units)
-        raise argparse.ArgumentTypeError(f"must be a fraction in (0, 1] of the scenario's test units. Got {text} "
-                                         f"instead.")
-    return value
-
-
-def flight_minutes(text: str) -> float:
-    """argparse type of ``--minutes`` overriding a scenario's flight duration: a number in (0, 1440] min.
-
-    The lower bound depends on the scenario (engine start + 1 min) and is checked with it.
-    """
-    from fuelhm_bench.scenarios.schema import MAX_DURATION_MIN
-
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number in (0, {MAX_DURATION_MIN:g}] min. Got '{text}' "
-                                         f"instead.") from None
-    if not 0.0 < value <= MAX_DURATION_MIN:  # (NaN fails too)
-        raise argparse.ArgumentTypeError(f"must be a number in (0, {MAX_DURATION_MIN:g}] min. Got {text} instead.")
-    return value
-
-
 def non_negative_int(text: str) -> int:
     """argparse type: an integer in [0, 2**63 - 1] (a seed, a count: what the results store can hold)."""
     from fuelhm_bench.scenarios.schema import MAX_SEED
@@ -77,8 +48,10 @@ def positive_float(text: str) -> float:
     return value
 
 
-def bounded(kind: type, low: float | None = None, high: float | None = None, unit: str = ""):
-    """argparse type: a finite ``kind`` (int or float) in ``[low, high]``, with a message naming the range.
+def bounded(kind: type, low: float | None = None, high: float | None = None, unit: str = "", *,
+            open_low: bool = False):
+    """argparse type: a finite ``kind`` (int or float) in ``[low, high]`` (``(low, high]`` with
+    ``open_low``), with a message naming the range.
 
     Examples
     --------
@@ -90,9 +63,9 @@ def bounded(kind: type, low: float | None = None, high: float | None = None, uni
     """
     noun = "an integer" if kind is int else "a number"
     if low is not None and high is not None:
-        rng = f" in [{low:g}, {high:g}]"
+        rng = f" in {'(' if open_low else '['}{low:g}, {high:g}]"
     elif low is not None:
-        rng = f" >= {low:g}"
+        rng = f" {'>' if open_low else '>='} {low:g}"
     else:
         rng = f" <= {high:g}" if high is not None else ""
     allowed = f"{noun}{rng}{' ' + unit if unit else ''}"
@@ -102,8 +75,8 @@ def bounded(kind: type, low: float | None = None, high: float | None = None, uni
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"must be {allowed}. Got '{text}' instead.") from None
-        if value != value or value in (float("inf"), float("-inf")) or (low is not None and value < low) or (
-                high is not None and value > high):
+        below = low is not None and (value <= low if open_low else value < low)
+        if value != value or value in (float("inf"), float("-inf")) or below or (high is not None and value > high):
             raise argparse.ArgumentTypeError(f"must be {allowed}. Got {text} instead.")
         return value
 
@@ -309,3 +282,11 @@ def option_message(message: str, args: argparse.Namespace) -> str:
         converted = f"such that {name} is {m['allowed']} (it was {m['given']})"
     shown = f"{typed:g}" if isinstance(typed, float) else str(typed)
     return f"{option} must be {converted}. Got {shown} instead.{m['rest']}"
+
+
+#: ``--scale``: the fraction of a scenario's test units kept (above 1 would be capped at its units).
+scale_fraction = bounded(float, 0.0, 1.0, open_low=True)
+
+#: ``--minutes`` overriding a scenario's flight duration; the lower bound depends on the scenario
+#: (engine start + 1 min) and is checked with it.
+flight_minutes = bounded(float, 0.0, 1440.0, "min", open_low=True)  # 1440: scenarios.schema.MAX_DURATION_MIN

@@ -138,7 +138,7 @@ class _Child:
         import pandas  # noqa: F401
 
         import fuelhm_bench.methods  # noqa: F401
-        from fuelhm_bench.methods.loading import _accepted, load_method
+        from fuelhm_bench.methods.loading import accepted_params, load_method
 
         sandbox = _landlock(p["readable"] + ["/usr", "/lib", "/lib64", "/etc", "/proc", "/sys", "/dev/urandom",
                                              "/dev/null", "/dev/zero"],
@@ -158,7 +158,7 @@ class _Child:
         get_params = getattr(self.method, "get_params", None)
         params = get_params() if callable(get_params) else {}
         shared = {k: v for k, v in p["shared_params"].items() if k in params and k not in (p["params"] or {})}
-        built = _accepted(type(self.method), shared) if isinstance(method, str) else {}  # passed to the constructor
+        built = accepted_params(type(self.method), shared) if isinstance(method, str) else {}  # (constructor)
         late = {k: v for k, v in shared.items() if k not in built}
         if late:
             self.method.set_params(**late)

@@ -77,7 +77,7 @@ def load_method(spec: str, params: dict | None = None, shared: dict | None = Non
         if missing:
             raise MethodError(f"'{spec}' is not a method: it neither subclasses fuelhm_bench.methods.BaseMethod "
                               f"nor defines {', '.join(missing)} (the interface: {', '.join(METHOD_INTERFACE)}).")
-    kwargs = {**_accepted(cls, shared or {}), **(params or {})}
+    kwargs = {**accepted_params(cls, shared or {}), **(params or {})}
     try:
         return cls(**kwargs)
     except TypeError as exc:
@@ -86,7 +86,7 @@ def load_method(spec: str, params: dict | None = None, shared: dict | None = Non
                           f"{', '.join(names) or 'none'}.") from None
 
 
-def _accepted(cls: type, values: dict) -> dict:
+def accepted_params(cls: type, values: dict) -> dict:
     """The items of ``values`` that ``cls``'s constructor takes by keyword."""
     import inspect
 
