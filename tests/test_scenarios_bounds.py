@@ -195,7 +195,7 @@ def test_validate_command_refuses_the_bomb_with_one_message(tmp_path, capsys):
 
     path = tmp_path / "lol.yaml"
     path.write_text(billion_laughs())
-    assert main(["validate", str(path)]) == 1
+    assert main(["validate", str(path)]) == 2
     out = capsys.readouterr().out
     assert f"INVALID {path}" in out and "once its aliases (*name) are expanded" in out
     assert len(out) < 2000

@@ -26,9 +26,10 @@ def test_validate_shipped(capsys):
     assert f"{len(list_scenarios())} valid, 0 invalid" in out
 
 
-def test_validate_mixed_files_exit_1_and_print_every_error(capsys):
+def test_validate_mixed_files_exit_2_and_print_every_error(capsys):
+    """An invalid file is bad input: exit status 2, as every command (it was 1)."""
     good, bad = BROKEN / "valid_base.yaml", BROKEN / "several_problems.yaml"
-    assert main(["validate", str(good), str(bad), "paper_2012"]) == 1
+    assert main(["validate", str(good), str(bad), "paper_2012"]) == 2
     out = capsys.readouterr().out
     assert f"OK      {good}" in out and f"INVALID {bad}" in out
     assert f"{bad}:7: fleet.units must be an integer in [1, 10000]. Got 0 instead." in out
@@ -37,15 +38,20 @@ def test_validate_mixed_files_exit_1_and_print_every_error(capsys):
 
 
 def test_validate_malformed_and_unknown_name(capsys):
-    assert main(["validate", str(BROKEN / "malformed.yaml")]) == 1
+    assert main(["validate", str(BROKEN / "malformed.yaml")]) == 2
     assert "malformed.yaml:24: the document must be well-formed YAML" in capsys.readouterr().out
-    assert main(["validate", "paper2012"]) == 1
+    assert main(["validate", "paper2012"]) == 2
     assert "Did you mean 'paper_2012'?" in capsys.readouterr().out
 
 
 def test_validate_without_arguments(capsys):
-    assert main(["validate"]) == 1
-    assert "give at least one FILE or --shipped" in capsys.readouterr().out
+    assert main(["validate"]) == 2
+    assert "error: validate needs at least one FILE or --shipped" in capsys.readouterr().err
+
+
+def test_no_command_is_a_usage_error(capsys):
+    assert main([]) == 2
+    assert "error: give a COMMAND" in capsys.readouterr().err
 
 
 def test_schema_prints_json(capsys):

@@ -69,9 +69,10 @@ def _on_sigint(signum, frame) -> None:  # pragma: no cover - exercised by a subp
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``fuelhm-bench`` console script.
 
-    Exit status: 0 on success, 1 for a command's own negative answer (e.g.
-    ``validate`` found invalid files), 2 for bad input (one ``error: ...`` line
-    naming the file, field or option; argparse usage errors too), 130 on Ctrl-C
+    Exit status: 0 on success, 2 for bad input (one ``error: ...`` line naming
+    the file, field or option; argparse usage errors, a missing command and the
+    invalid files of ``validate`` too), 3 when a method of ``evaluate`` /
+    ``leaderboard`` did not finish ok, 4 when ``fidelity`` misses a target, 130 on Ctrl-C
     (one line; outputs are written atomically, so no partial file is left that
     looks complete).
     """
@@ -133,7 +134,8 @@ def _run(argv: list[str] | None) -> int:
         args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
-        return 1
+        print("error: give a COMMAND (listed above).", file=sys.stderr)
+        return 2
     try:
         return int(args.func(args) or 0)
     except FuelHMError as exc:
