@@ -16,6 +16,8 @@ from typing import Any
 
 import yaml
 
+from fuelhm_bench.filetypes import check_file_type
+
 __all__ = ["SafeLoader", "read_yaml", "safe_load"]
 
 
@@ -40,14 +42,17 @@ def read_yaml(path, what: str, error: type[Exception], *, max_bytes: int = 1_000
     Raises
     ------
     error
-        When the file cannot be read, is larger than ``max_bytes``, is not UTF-8 text or not YAML;
-        the message names the file (and the line, for YAML errors).
+        When the file cannot be read, its name does not end in ``.yaml`` / ``.yml``
+        (:mod:`fuelhm_bench.filetypes`), it is larger than ``max_bytes``, not UTF-8 text or not
+        YAML; the message names the file (and the line, for YAML errors).
     """
     path = Path(path)
     try:
         size = path.stat().st_size
         if size > max_bytes:
             raise error(f"{path}: a {what} must be at most {max_bytes} bytes. Got {size} bytes instead.")
+        if not path.is_dir():
+            check_file_type(path, "yaml", what=what, error=error)  # (a flight file is not read as YAML)
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise error(f"{path}: cannot read the {what}: it is not UTF-8 text (a binary file?).") from None

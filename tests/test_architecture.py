@@ -13,7 +13,9 @@ PACKAGE = ROOT / "fuelhm_bench"
 
 #: Layers, lowest first. A module may import its own package and packages of strictly lower layers.
 LAYERS = (
-    ("errors", "taxonomy", "_numba_cache", "yamlfiles"),
+    ("errors", "taxonomy", "_numba_cache"),
+    ("filetypes",),  # what a file is from its name: every reader and writer of user files asks it
+    ("yamlfiles",),
     ("__init__",),
     ("io", "physics", "indicators", "diagnosis"),
     ("methods",),  # the method interface and its adapters use the diagnosis statistics

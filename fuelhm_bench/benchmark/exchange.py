@@ -244,7 +244,7 @@ def _write_raw(config, path: Path, progress) -> Path:
 
 # --------------------------------------------------------------------------- decisions
 def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
-    """Read and validate a decisions file (CSV or Parquet).
+    """Read and validate a decisions file (Parquet, CSV or CSV.gz, by its suffix).
 
     Returns
     -------
@@ -258,17 +258,15 @@ def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
     DataFormatError
         Naming the file, the column and the first bad row (1-based line of a CSV).
     """
+    from fuelhm_bench.io.tables import read_table, table_format
+
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise DataFormatError(f"{path}: no such decisions file.")
-    try:
-        frame = (pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq")
-                 else pd.read_csv(path, dtype={"split": str, "alarm": str}, keep_default_na=False,
-                                  na_values=[""]))
-    except Exception as exc:  # noqa: BLE001 - any reader failure is a format error of that file
-        raise DataFormatError(f"{path}: cannot be read as CSV or Parquet ({exc}).") from None
-    line = (lambda i: f"line {i + 2}") if path.suffix.lower() not in (".parquet", ".pq") \
-        else (lambda i: f"row {i}")
+    frame = read_table(path, what="decisions file", csv_dtypes={"split": "str", "alarm": "str"},
+                       csv_na_values=[""])  # (a directory, a name not saying the format: refused, named)
+    csv = table_format(path) != "parquet"
+    line = (lambda i: f"line {i + 2}") if csv else (lambda i: f"row {i}")
     missing = [c for c in DECISION_FILE_COLUMNS if c not in frame.columns]
     if missing:
         raise DataFormatError(f"{path}: the decisions file must have the columns "

@@ -8,12 +8,12 @@ from fuelhm_bench.cli.export import add_scenario_options, scenario_kwargs
 
 
 def register(sub) -> None:
-    p = sub.add_parser("score", help="score a decisions file (CSV or Parquet) produced outside this package",
+    p = sub.add_parser("score", help="score a decisions file (Parquet or CSV) produced outside this package",
                        description="Score the decisions of a method written in any language on the flights of "
                                    "'fuelhm-bench export' (use the same scenario options). The file has one row per "
                                    "flight: split (test or calibration), unit_id, flight_index, score, alarm and "
                                    "optionally guilt_<mode>; see docs/scoring.md, 'External methods'.")
-    p.add_argument("decisions", help="decisions file (.csv or .parquet)")
+    p.add_argument("decisions", help="decisions file (.parquet, .csv or .csv.gz)")
     add_scenario_options(p)
     p.add_argument("--out", default=None, help="also write the KPI tables into this directory")
     p.add_argument("--force", action="store_true", help="overwrite existing table files")

@@ -34,6 +34,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from fuelhm_bench.errors import DataFormatError, OutputPathError
+from fuelhm_bench.filetypes import FILE_TYPES, check_file_type
 from fuelhm_bench.io.outputs import check_output_path, temporary_path
 
 __all__ = [
@@ -47,8 +48,9 @@ __all__ = [
 
 TableFormat = Literal["parquet", "csv", "csv.gz"]
 
-#: File-name suffixes understood by :func:`table_format`, in order of preference.
-SUPPORTED_SUFFIXES: tuple[str, ...] = (".parquet", ".csv", ".csv.gz")
+#: File-name suffixes understood by :func:`table_format`, in order of preference
+#: (:data:`fuelhm_bench.filetypes.FILE_TYPES`, the one place that maps suffixes to file types).
+SUPPORTED_SUFFIXES: tuple[str, ...] = FILE_TYPES["table"]
 
 # Exceptions raised by pandas / pyarrow / gzip while parsing a bad file.
 _READ_ERRORS: tuple[type[BaseException], ...] = (
@@ -60,13 +62,15 @@ _READ_ERRORS: tuple[type[BaseException], ...] = (
 )
 
 
-def table_format(path: str | os.PathLike[str]) -> TableFormat:
+def table_format(path: str | os.PathLike[str], what: str = "table file") -> TableFormat:
     """Return the table format implied by a file name's suffix.
 
     Parameters
     ----------
     path : str or path-like
         File name; only its suffix is examined (case-insensitive).
+    what : str, default="table file"
+        Noun used in the error message, e.g. ``"decisions file"``.
 
     Returns
     -------
@@ -83,17 +87,7 @@ def table_format(path: str | os.PathLike[str]) -> TableFormat:
     >>> table_format("runs/flights.csv.gz")
     'csv.gz'
     """
-    name = Path(path).name.lower()
-    if name.endswith(".csv.gz"):
-        return "csv.gz"
-    if name.endswith(".csv"):
-        return "csv"
-    if name.endswith(".parquet"):
-        return "parquet"
-    raise DataFormatError(
-        f"Cannot tell the format of '{path}' from its name: the suffix must be one of "
-        f"{', '.join(SUPPORTED_SUFFIXES)}."
-    )
+    return check_file_type(path, "table", what=what).lstrip(".")  # type: ignore[return-value]
 
 
 def read_table(
@@ -101,6 +95,7 @@ def read_table(
     *,
     what: str = "table file",
     csv_dtypes: dict[str, str] | None = None,
+    csv_na_values: list[str] | None = None,
 ) -> pd.DataFrame:
     """Read a Parquet / CSV / CSV.gz file into a DataFrame with a default index.
 
@@ -114,6 +109,9 @@ def read_table(
         ``dtype`` mapping passed to :func:`pandas.read_csv` (ignored for
         Parquet, whose columns are typed). Columns absent from the file are
         ignored.
+    csv_na_values : list of str, optional
+        The only CSV cells read as missing (e.g. ``[""]``, so a cell ``nan``
+        stays text and can be reported as given); default: pandas' list.
 
     Returns
     -------
@@ -130,11 +128,11 @@ def read_table(
         unsupported suffix, or cannot be parsed. The message names the file.
     """
     path = Path(path)
-    fmt = table_format(path)
     if not path.exists():
         raise DataFormatError(f"The {what} '{path}' does not exist.")
     if path.is_dir():
-        raise DataFormatError(f"The {what} '{path}' is a directory, not a {fmt} file.")
+        raise DataFormatError(f"The {what} '{path}' is a directory, not a file.")
+    fmt = table_format(path, what)
     try:
         size = path.stat().st_size
     except OSError as exc:
@@ -145,7 +143,7 @@ def read_table(
         if fmt == "parquet":
             frame = _read_parquet(path)
         else:
-            frame = _read_csv(path, compressed=fmt == "csv.gz", dtypes=csv_dtypes or {})
+            frame = _read_csv(path, compressed=fmt == "csv.gz", dtypes=csv_dtypes or {}, na_values=csv_na_values)
     except pd.errors.EmptyDataError as exc:
         raise DataFormatError(f"The {what} '{path}' is empty: it has no header line.") from exc
     except DataFormatError:
@@ -177,7 +175,8 @@ def _read_parquet(path: Path) -> pd.DataFrame:
     return frame.reset_index(drop=True)
 
 
-def _read_csv(path: Path, *, compressed: bool, dtypes: dict[str, str]) -> pd.DataFrame:
+def _read_csv(path: Path, *, compressed: bool, dtypes: dict[str, str], na_values: list[str] | None = None
+              ) -> pd.DataFrame:
     header = pd.read_csv(path, compression="gzip" if compressed else None, nrows=1, header=None, dtype=str)
     dup = _duplicate_columns(str(v) for v in header.iloc[0]) if len(header) else []
     if dup:  # (pandas would rename the second one 'name.1' without a word)
@@ -188,6 +187,7 @@ def _read_csv(path: Path, *, compressed: bool, dtypes: dict[str, str]) -> pd.Dat
         compression="gzip" if compressed else None,
         dtype=dtypes or None,
         low_memory=False,
+        **({} if na_values is None else {"keep_default_na": False, "na_values": na_values}),
     )
 
 

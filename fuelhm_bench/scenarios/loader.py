@@ -32,6 +32,7 @@ from pathlib import Path
 import yaml
 
 from fuelhm_bench.errors import ScenarioError
+from fuelhm_bench.filetypes import check_file_type
 from fuelhm_bench.yamlfiles import SafeLoader
 from fuelhm_bench.scenarios._fields import (
     MISSING,
@@ -397,6 +398,8 @@ def load_scenario_file(path: str | Path) -> Scenario:
     """
     path = Path(path)
     try:
+        if path.is_file():
+            check_file_type(path, "yaml", what="scenario file", error=ScenarioError)
         if path.stat().st_size > MAX_FILE_BYTES:
             raise ScenarioError(f"{path}: the scenario file must be at most {MAX_FILE_BYTES} bytes. Got "
                                 f"{path.stat().st_size} bytes instead.")
