@@ -142,14 +142,23 @@ def progress_bar(total: int, desc: str, unit: str = "flight"):
     return tqdm(total=total, desc=desc, unit=unit, disable=bool(disable), file=sys.stderr)
 
 
-def check_output(path: str | Path, *, force: bool, option: str = "--out") -> Path:
-    """Check an output file given on the command line (see :func:`fuelhm_bench.io.outputs.check_output_path`)."""
-    return check_output_path(path, overwrite=force, option=option)
+def check_output(path: str | Path, *, force: bool, option: str = "--out", kind: str | None = None,
+                 what: str = "output file", inputs=None) -> Path:
+    """Check an output file given on the command line, before any work.
+
+    The one check of every command's output files (see
+    :func:`fuelhm_bench.io.outputs.check_output_path`): named for what is written there
+    (``kind``: ``"table"``, ``"yaml"``, ``"image"`` or ``"json"``, :mod:`fuelhm_bench.filetypes`),
+    not one of the command's ``inputs`` (``{"FLIGHTS": path, "--model": path}``; even with
+    ``--force``), not existing unless ``force``.
+    """
+    return check_output_path(path, overwrite=force, option=option, kind=kind, what=what, inputs=inputs)
 
 
-def check_output_dir(path: str | Path, *, force: bool = True, names=(), option: str = "--out") -> Path:
-    """Create an output directory (see :func:`fuelhm_bench.io.outputs.check_output_dir`)."""
-    return _check_output_dir(path, force=force, names=names, option=option)
+def check_output_dir(path: str | Path, *, force: bool = True, names=(), option: str = "--out", inputs=None) -> Path:
+    """Create an output directory (see :func:`fuelhm_bench.io.outputs.check_output_dir`); none of ``names``
+    in it may be one of the command's ``inputs``."""
+    return _check_output_dir(path, force=force, names=names, option=option, inputs=inputs)
 
 
 def extraction_config(flight):

@@ -20,9 +20,9 @@ def register(sub) -> None:
                     "(RMS residual over the velocity-gain curve) before and after, the fitted values and their "
                     "identifiability.")
     p.add_argument("flights", help="measured healthy flights (.parquet, .csv, .csv.gz; format: docs/data-format.md)")
-    p.add_argument("--out", required=True, help="output model file (YAML)")
+    p.add_argument("--out", required=True, help="output model file (.yaml or .yml)")
     p.add_argument("--model", metavar="YAML", help="start model (default: nominal)")
-    p.add_argument("--plot", metavar="FILE", help="write the curves before/after over the data (PNG, like Fig. 7)")
+    p.add_argument("--plot", metavar="FILE", help="write the curves before/after over the data (.png, .pdf or .svg, like Fig. 7)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sample selection (default 0)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.set_defaults(func=run)
@@ -35,8 +35,10 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.io.outputs import atomic_output
     from fuelhm_bench.physics.model import load_model, save_model
 
-    out = check_output(args.out, force=args.force)
-    plot = check_output(args.plot, force=args.force, option="--plot") if args.plot else None
+    inputs = {"FLIGHTS": args.flights, "--model": args.model}
+    out = check_output(args.out, force=args.force, kind="yaml", what="model file", inputs=inputs)
+    plot = check_output(args.plot, force=args.force, option="--plot", kind="image", what="figure",
+                        inputs=inputs) if args.plot else None
     start = load_model(args.model) if args.model else None
     flights = usable_flights(args.flights)
     config = CalibrationConfig(seed=args.seed)

@@ -62,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
                                seed=args.seed)
     publish = contextlib.nullcontext(None)
     if args.out:  # checked now; published (atomically) only when every file is written
-        publish = atomic_directory(args.out, force=args.force, names=OUTPUT_FILES)
+        publish = atomic_directory(args.out, force=args.force, names=OUTPUT_FILES,
+                                   inputs={"FLIGHTS": args.flights, "--model": args.model})
     with publish as out_dir:
         return _run(args, config, out_dir)
 

@@ -19,20 +19,18 @@ def register(sub) -> None:
                                    "every indicator invalid.")
     p.add_argument("flights", help="flight file (.parquet, .csv, .csv.gz)")
     p.add_argument("--force", action="store_true", help="overwrite the output file")
-    p.add_argument("--out", required=True, help="output table (.csv or .parquet)")
+    p.add_argument("--out", required=True, help="output table (.parquet, .csv or .csv.gz)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from fuelhm_bench.errors import DataFormatError
     from fuelhm_bench.indicators import extract_table
     from fuelhm_bench.io import read_flights, split_flights
 
-    out = check_output(args.out, force=args.force)
-    if not (out.name.endswith(".csv") or out.suffix == ".parquet"):
-        raise DataFormatError(f"--out {out}: the table format must be .csv or .parquet.")
+    out = check_output(args.out, force=args.force, kind="table", what="indicator table",
+                       inputs={"FLIGHTS": args.flights})
     flights, rejected = split_flights(read_flights(args.flights), source=str(args.flights))
     rows = []
     with progress_bar(len(flights), "extracting") as bar:
@@ -62,9 +60,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {r}", file=sys.stderr)
     _refuse_meaningless(table, args.flights)
     with atomic_output(out, force=args.force, option="--out") as tmp:
-        if out.suffix == ".parquet":
+        if out.suffix.lower() == ".parquet":
             table.to_parquet(tmp, index=False)
-        else:
+        else:  # .csv, or .csv.gz (compression inferred from the name)
             table.to_csv(tmp, index=False)
     n_ok = int((table["quality_reason"] == "").sum()) if len(table) else 0
     print(f"wrote {len(table)} rows to {out} ({n_ok} flights with all 10 indicators valid, "

@@ -88,10 +88,8 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.indicators.plot import velocity_gain_figure
     from fuelhm_bench.io.outputs import atomic_output
 
-    out = check_output(args.out, force=args.force)
-    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
-        raise DataFormatError(f"--out {out}: the image format must be .png, .pdf or .svg. Got "
-                              f"'{out.suffix or out.name}' instead.")
+    inputs = {"FLIGHTS": args.flights, **{f"--overlay {spec}": spec.partition("=")[0] for spec in args.overlay}}
+    out = check_output(args.out, force=args.force, kind="image", what="figure", inputs=inputs)
     chosen = _select(_load(args.flights), args.flight, args.flights)
     curves, labels, inds = [], [], []
     pts_i, pts_v = [], []

@@ -13,7 +13,7 @@ def register(sub) -> None:
                        description="The JSON Schema (draft 2020-12) of scenario YAML files, generated from the "
                                    "scenario dataclasses. Point your editor's YAML language server at it, e.g. "
                                    "with '# yaml-language-server: $schema=scenario.schema.json' at the top of a file.")
-    p.add_argument("--out", metavar="FILE", help="write the schema to FILE instead of printing it")
+    p.add_argument("--out", metavar="FILE", help="write the schema to FILE (.json) instead of printing it")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
     p.set_defaults(func=run)
 
@@ -25,6 +25,6 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None:
         print(text, end="")
         return 0
-    out = write_text(args.out, text, force=args.force, option="--out")
+    out = write_text(args.out, text, force=args.force, option="--out", kind="json", what="JSON Schema")
     print(f"wrote the scenario JSON Schema to {out}")
     return 0

@@ -20,7 +20,26 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+#: Tables written with --out besides the scorecard's (:data:`~fuelhm_bench.scoring.SCORECARD_TABLES`).
+OUT_TABLES = ("headline_intervals",)
+
+
 def run(args: argparse.Namespace) -> int:
+    import contextlib
+
+    from fuelhm_bench.cli._common import atomic_directory
+    from fuelhm_bench.scoring import SCORECARD_TABLES
+    from fuelhm_bench.scoring.export import table_files
+
+    publish = contextlib.nullcontext(None)
+    if args.out:  # checked before scoring; published (atomically) only when every table is written
+        publish = atomic_directory(args.out, force=args.force, names=table_files((*SCORECARD_TABLES, *OUT_TABLES)),
+                                   inputs={"DECISIONS": args.decisions})
+    with publish as out_dir:
+        return _run(args, out_dir)
+
+
+def _run(args: argparse.Namespace, out_dir) -> int:
     from fuelhm_bench.benchmark.exchange import score_decisions
     from fuelhm_bench.scoring import headline_kpis
     from fuelhm_bench.scoring.bootstrap import scorecard_intervals
@@ -31,20 +50,9 @@ def run(args: argparse.Namespace) -> int:
         extra = (f"  [{ci.loc[kpi, 'ci_low']:.4g}, {ci.loc[kpi, 'ci_high']:.4g}]"
                  if kpi in ci.index and ci.loc[kpi, "ci_low"] == ci.loc[kpi, "ci_low"] else "")
         print(f"{kpi:28s} {value:.4g}{extra}")
-    if args.out:
-        from fuelhm_bench.cli._common import check_output_dir
+    if out_dir is not None:
         from fuelhm_bench.scoring import write_tables
 
-        from fuelhm_bench.errors import OutputPathError
-
-        out = check_output_dir(args.out)
-        tables = {**card.tables(), "headline_intervals": ci.reset_index()}
-        try:
-            write_tables(tables, out, overwrite=args.force)
-        except OutputPathError as exc:
-            if args.force:
-                raise
-            raise OutputPathError(f"--out {out} already holds this command's tables; refusing to overwrite them "
-                                  f"(pass --force, or choose another --out). {exc}") from None
-        print(f"tables: {out}")
+        write_tables({**card.tables(), "headline_intervals": ci.reset_index()}, out_dir)
+        print(f"tables: {args.out}")
     return 0

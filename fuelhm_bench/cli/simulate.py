@@ -142,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
     onset_min, onset_max = parse_onset(onset, args.flights) if args.degrade else parse_onset(onset)
     if not args.degrade and args.onset is not None:
         raise ParameterError(f"--onset {args.onset} applies to the degradations of --degrade, and none is given.")
+    out = check_output(args.out, force=args.force, kind="table", what="flight file", inputs={"--model": args.model})
 
     from fuelhm_bench.flights.fleet import FleetConfig, build_units, flights_frame, iter_flights, labels_frame
     from fuelhm_bench.flights.mission import MissionProfile
@@ -162,8 +163,8 @@ def run(args: argparse.Namespace) -> int:
     config = FleetConfig(n_units=args.units, n_flights=args.flights, mission=mission, nominal=model,
                          dispersion=dataclasses.replace(Dispersion(), scale=args.dispersion),
                          schedules=tuple(schedules), seed=args.seed)
-    out = check_output(args.out, force=args.force)
-    check_output(labels_path_for(out), force=args.force)
+    check_output(labels_path_for(out), force=args.force, kind="table", what="labels file",
+                 inputs={"--model": args.model})
     units = {u.unit_id: u for u in build_units(config)}
     hidden = ",".join(e.id for e in model.effects)
     total = args.units * args.flights

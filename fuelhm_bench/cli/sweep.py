@@ -57,12 +57,13 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"{', '.join(unused)}: a sweep records the true rod position (a virtual bench without "
                              f"the LVDT), so the sensor's noise, resolution and noise seed do not apply; leave "
                              f"{'it' if len(unused) == 1 else 'them'} out.")
+    out_path = check_output(args.out, force=args.force, kind="table", what="flight file",
+                            inputs={"--model": args.model})
     model = model_from_args(args)
     model = model.degraded(dict(parse_degrade(s) for s in args.degrade))
     sweep = VelocityGainSweep(current_min_a=args.min_ma * 1e-3, current_max_a=args.max_ma * 1e-3,
                               ramp_duration_s=args.ramp_seconds, n2_frac=args.n2_pct / 100.0,
                               frame_s=model.controller.frame_s, cycles=args.cycles)
-    out_path = check_output(args.out, force=args.force)
     res = run_sweep(model, sweep, seed=0)  # (the seed only draws the LVDT noise, which the file does not carry)
     out = res.output
     n = len(out.time_s)

@@ -4,6 +4,10 @@ Every command that writes a file or a directory of results goes through this
 module, so the rule and its messages are the same everywhere:
 
 * an existing output is refused unless ``force`` (``--force``) is given;
+* an output that is one of the command's input files (the same file, through
+  symlinks or hard links too) is refused even with ``force``;
+* an output of a fixed type must be named for it (``kind``: a model is
+  ``.yaml``, a figure ``.png``/``.pdf``/``.svg``; :mod:`fuelhm_bench.filetypes`);
 * missing parent directories are created; a parent path that is a *file*, a
   directory where a file is expected, or an unwritable directory is refused
   with a message naming the option, the path and the offending component;
@@ -49,13 +53,14 @@ from __future__ import annotations
 import contextlib
 import os
 import uuid
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
 from fuelhm_bench.errors import OutputPathError
+from fuelhm_bench.filetypes import check_file_type
 
 __all__ = ["MANIFEST", "atomic_directory", "atomic_output", "check_output_dir", "check_output_path", "claim",
-           "refuse_foreign", "temporary_path", "write_text", "written_by_us"]
+           "refuse_foreign", "refuse_inputs", "temporary_path", "write_text", "written_by_us"]
 
 
 def _label(option: str | None, what: str, path: Path) -> str:
@@ -87,8 +92,53 @@ def _make_parent(path: Path, option: str | None, what: str) -> None:
                               "not writable (permission denied).")
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name the same file (symlinks and hard links resolved)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one does not exist (yet)
+        return a.resolve() == b.resolve()
+
+
+def refuse_inputs(path: str | os.PathLike[str], inputs: Mapping | None, *, option: str | None = None,
+                  what: str = "output file") -> None:
+    """Refuse to write ``path`` when it is one of the command's input files, whatever ``--force`` says.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The output file.
+    inputs : mapping of str to (path-like or None), or None
+        The command's input files by how the user gave them (``{"FLIGHTS": "a.csv", "--model": None}``).
+    option, what
+        As for :func:`check_output_path`.
+
+    Raises
+    ------
+    OutputPathError
+        Naming the output, the input it would replace and how it was given.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp()); _ = (d / "a.csv").write_text("x")
+    >>> refuse_inputs(d / "b.csv", {"FLIGHTS": d / "a.csv"})
+    >>> try:
+    ...     refuse_inputs(d / "." / "a.csv", {"FLIGHTS": d / "a.csv"}, option="--out")
+    ... except OutputPathError as exc:
+    ...     print(str(exc).split(": ", 1)[1])
+    it is the input file FLIGHTS (...a.csv); an input is never overwritten, even with --force. Choose another --out.
+    """
+    path = Path(path)
+    for given_as, source in (inputs or {}).items():
+        if source is not None and _same_file(path, Path(source)):
+            raise OutputPathError(f"Cannot write {_label(option, what, path)}: it is the input file {given_as} "
+                                  f"({source}); an input is never overwritten, even with --force. "
+                                  f"Choose another {option or 'output file'}.")
+
+
 def check_output_path(path: str | os.PathLike[str], *, overwrite: bool, what: str = "output file",
-                      option: str | None = None) -> Path:
+                      option: str | None = None, kind: str | None = None, inputs: Mapping | None = None) -> Path:
     """Check that ``path`` may be written and create its parent directories.
 
     Parameters
@@ -101,6 +151,11 @@ def check_output_path(path: str | os.PathLike[str], *, overwrite: bool, what: st
         Noun used in messages when no option is given.
     option : str or None, default=None
         Command-line option the path came from (e.g. ``"--out"``), named in messages.
+    kind : {"table", "yaml", "image", "json"} or None, default=None
+        Type of what is written: the name must end in one of its suffixes
+        (:data:`fuelhm_bench.filetypes.FILE_TYPES`); None: any name.
+    inputs : mapping of str to path-like or None, default=None
+        The command's input files (:func:`refuse_inputs`).
 
     Returns
     -------
@@ -109,12 +164,16 @@ def check_output_path(path: str | os.PathLike[str], *, overwrite: bool, what: st
     Raises
     ------
     OutputPathError
-        ``path`` is a directory, exists while ``overwrite`` is false, lies
-        below a file, or its directory cannot be created or written.
+        ``path`` is not named for ``kind``, is one of ``inputs``, is a
+        directory, exists while ``overwrite`` is false, lies below a file, or
+        its directory cannot be created or written.
     """
     path = Path(path)
     if path.is_dir():
         raise OutputPathError(f"Cannot write {_label(option, what, path)}: it is a directory; give a file name.")
+    if kind is not None:
+        check_file_type(path, kind, what=what, option=option, writing=True, error=OutputPathError)
+    refuse_inputs(path, inputs, option=option, what=what)
     if path.exists() and not overwrite:
         raise OutputPathError(f"The {what} '{path}' already exists; refusing to overwrite it (pass --force to "
                               "replace it; overwrite=True from Python).")
@@ -123,7 +182,7 @@ def check_output_path(path: str | os.PathLike[str], *, overwrite: bool, what: st
 
 
 def check_output_dir(path: str | os.PathLike[str], *, force: bool = True, names: Iterable[str] = (),
-                     option: str | None = "--out") -> Path:
+                     option: str | None = "--out", inputs: Mapping | None = None) -> Path:
     """Check and create an output directory.
 
     Parameters
@@ -137,6 +196,9 @@ def check_output_dir(path: str | os.PathLike[str], *, force: bool = True, names:
         that exists is refused (all of them named in one message).
     option : str or None, default="--out"
         Option named in messages.
+    inputs : mapping of str to path-like or None, default=None
+        The command's input files: none may be one of ``names`` in ``path``
+        (:func:`refuse_inputs`), even with ``force``.
 
     Returns
     -------
@@ -145,10 +207,14 @@ def check_output_dir(path: str | os.PathLike[str], *, force: bool = True, names:
     Raises
     ------
     OutputPathError
-        ``path`` (or an ancestor) is a file, cannot be created or written, or
-        holds one of ``names`` while ``force`` is false.
+        ``path`` (or an ancestor) is a file, cannot be created or written,
+        would replace an input, or holds one of ``names`` while ``force`` is
+        false.
     """
     path = Path(path)
+    names = tuple(names)
+    for name in names:
+        refuse_inputs(path / name, inputs, option=option, what="output file")
     label = _label(option, "output directory", path)
     if path.exists() and not path.is_dir():
         raise OutputPathError(f"Cannot use {label}: it is a file, not a directory.")
@@ -163,8 +229,9 @@ def check_output_dir(path: str | os.PathLike[str], *, force: bool = True, names:
         raise OutputPathError(f"Cannot write to {label} (permission denied).")
     existing = [n for n in names if (path / n).exists()]
     if existing and not force:
-        raise OutputPathError(f"{path} already holds {', '.join(existing)}; refusing to overwrite "
-                              "(pass --force).")
+        shown = ", ".join(existing[:5]) + (f" and {len(existing) - 5} more" if len(existing) > 5 else "")
+        raise OutputPathError(f"{_label(option, 'output directory', path)} already holds {shown}; refusing to "
+                              f"overwrite (pass --force, or choose another {option or 'folder'}).")
     return path
 
 
@@ -212,7 +279,7 @@ def temporary_path(path: Path) -> Path:
 
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike[str], *, force: bool, what: str = "output file",
-                  option: str | None = None) -> Iterator[Path]:
+                  option: str | None = None, kind: str | None = None, inputs: Mapping | None = None) -> Iterator[Path]:
     """Write ``path`` atomically: yield a temporary path, rename it onto ``path`` on success.
 
     Parameters
@@ -221,7 +288,7 @@ def atomic_output(path: str | os.PathLike[str], *, force: bool, what: str = "out
         Target file (checked by :func:`check_output_path` first).
     force : bool
         Whether an existing target may be replaced.
-    what, option
+    what, option, kind, inputs
         As for :func:`check_output_path`.
 
     Yields
@@ -238,7 +305,7 @@ def atomic_output(path: str | os.PathLike[str], *, force: bool, what: str = "out
         ``KeyboardInterrupt``) the temporary file is deleted and the target is
         left as it was.
     """
-    target = check_output_path(path, overwrite=force, what=what, option=option)
+    target = check_output_path(path, overwrite=force, what=what, option=option, kind=kind, inputs=inputs)
     tmp = temporary_path(target)
     try:
         yield tmp
@@ -257,7 +324,7 @@ def atomic_output(path: str | os.PathLike[str], *, force: bool, what: str = "out
 
 
 def write_text(path: str | os.PathLike[str], text: str, *, force: bool, what: str = "output file",
-               option: str | None = None) -> Path:
+               option: str | None = None, kind: str | None = None) -> Path:
     """Write a text file atomically (UTF-8) under the overwrite rule.
 
     Parameters
@@ -268,21 +335,21 @@ def write_text(path: str | os.PathLike[str], text: str, *, force: bool, what: st
         Content.
     force : bool
         Whether an existing file may be replaced.
-    what, option
+    what, option, kind
         As for :func:`check_output_path`.
 
     Returns
     -------
     pathlib.Path
     """
-    with atomic_output(path, force=force, what=what, option=option) as tmp:
+    with atomic_output(path, force=force, what=what, option=option, kind=kind) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
 
 
 @contextlib.contextmanager
 def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names: Iterable[str] = (),
-                     option: str | None = "--out") -> Iterator[Path]:
+                     option: str | None = "--out", inputs: Mapping | None = None) -> Iterator[Path]:
     """Fill an output directory atomically: yield a temporary sibling, publish its content on success.
 
     The command writes every file into the yielded directory (a hidden
@@ -308,6 +375,9 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names
         Files the command will write; without ``force`` any that exists is refused.
     option : str or None, default="--out"
         Option named in messages.
+    inputs : mapping of str to path-like or None, default=None
+        The command's input files: none may be replaced (checked for ``names``
+        first, and for every written file at publication), even with ``force``.
 
     Yields
     ------
@@ -333,6 +403,8 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names
     target = Path(path)
     names = tuple(names)
     label = _label(option, "output directory", target)
+    for name in names:
+        refuse_inputs(target / name, inputs, option=option)
     if target.exists():
         check_output_dir(target, force=force, names=names, option=option)
         refuse_foreign(target, names, force=force, option=option)
@@ -349,6 +421,8 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names
     try:
         yield tmp
         written = sorted(p.name for p in tmp.iterdir())
+        for name in written:
+            refuse_inputs(target / name, inputs, option=option)
         if target.exists():
             check_output_dir(target, force=force, names=names, option=option)  # appeared meanwhile?
             refuse_foreign(target, written, force=force, option=option)

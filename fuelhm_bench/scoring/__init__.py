@@ -51,7 +51,7 @@ _HOMES = {  # public name -> its module: imported on first use (PEP 562), so tha
     **dict.fromkeys(('degradation_summary', 'drift_sweep_table', 'error_rate_changes', 'robustness', 'robustness_table'), "robustness"),
     **dict.fromkeys(('cd_diagram', 'critical_difference', 'friedman_test', 'mean_ranks', 'rank_matrix', 'wilcoxon_holm'), "ranking"),
     **dict.fromkeys(('HEALTHY', 'LABEL_COLUMNS', 'MULTIPLE', 'NO_ALARM', 'TIE', 'Run', 'flight_table'), "run"),
-    **dict.fromkeys(('HEADLINE_KPIS', 'Scorecard', 'headline_kpis', 'score_run'), "scorecard"),
+    **dict.fromkeys(('HEADLINE_KPIS', 'SCORECARD_TABLES', 'Scorecard', 'headline_kpis', 'score_run'), "scorecard"),
     **dict.fromkeys(('summary_components', 'summary_score'), "summary"),
     **dict.fromkeys(('HealthyScoreModel', 'fit_healthy_model', 'threshold_table'), "thresholds"),
 }
@@ -61,7 +61,7 @@ __all__ = [
     "guilt_calibration", "kpi_intervals", "mean_ranks", "plot_reliability", "rank_matrix",
     "reliability_table", "scorecard_intervals", "wilcoxon_holm",
     "ALL_MODES", "HEADLINE_KPIS", "HEALTHY", "HealthyScoreModel", "LABEL_COLUMNS", "METHOD_ALARM",
-    "MULTIPLE", "NO_ALARM", "Run", "Scorecard", "ScoringConfig", "TIE", "bootstrap_ratio_interval",
+    "MULTIPLE", "NO_ALARM", "Run", "SCORECARD_TABLES", "Scorecard", "ScoringConfig", "TIE", "bootstrap_ratio_interval",
     "classification_table", "confusion_matrix", "delay_summary", "detection_by_band",
     "detection_delays", "detection_table", "diagnosis_table", "fit_healthy_model",
     "flight_table", "headline_kpis", "maintenance_cost", "null_decisions", "perfect_decisions",

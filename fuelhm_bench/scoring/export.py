@@ -12,9 +12,23 @@ import pandas as pd
 
 from fuelhm_bench.errors import OutputPathError, ParameterError
 
-__all__ = ["to_latex", "to_markdown", "write_tables"]
+__all__ = ["TABLE_FORMATS", "table_files", "to_latex", "to_markdown", "write_tables"]
 
-_FORMATS = ("csv", "md", "tex")
+#: File formats of :func:`write_tables`.
+TABLE_FORMATS = ("csv", "md", "tex")
+_FORMATS = TABLE_FORMATS
+
+
+def table_files(names: Iterable[str], formats: Iterable[str] = TABLE_FORMATS) -> list[str]:
+    """The file names :func:`write_tables` writes for the tables ``names`` (to check an output folder first).
+
+    Examples
+    --------
+    >>> table_files(["headline"], ["csv", "md"])
+    ['headline.csv', 'headline.md']
+    """
+    formats = tuple(formats)
+    return [f"{name}.{fmt}" for name in names for fmt in formats]
 _LATEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#",
                   "_": r"\_", "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}",
                   "^": r"\textasciicircum{}"}
@@ -161,7 +175,7 @@ def write_tables(tables: Mapping[str, pd.DataFrame] | Any, directory: str | Path
         raise ParameterError(f"The 'formats' parameter of write_tables must contain only "
                              f"{list(_FORMATS)}. Got {bad} instead.")
     out_dir = Path(directory)
-    targets = [(name, fmt, out_dir / f"{name}.{fmt}") for name in tables for fmt in formats]
+    targets = [(name, fmt, out_dir / f"{name}.{fmt}") for name in tables for fmt in formats]  # (table_files)
     existing = [str(p) for _, _, p in targets if p.exists()]
     if existing and not overwrite:
         raise OutputPathError(f"The 'directory' parameter of write_tables must not hold the "

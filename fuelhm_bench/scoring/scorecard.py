@@ -18,7 +18,13 @@ from fuelhm_bench.scoring.run import Run, flight_table
 from fuelhm_bench.scoring.summary import summary_components, summary_score
 from fuelhm_bench.scoring.thresholds import HealthyScoreModel, fit_healthy_model, threshold_table
 
-__all__ = ["HEADLINE_KPIS", "Scorecard", "headline_kpis", "score_run"]
+__all__ = ["HEADLINE_KPIS", "SCORECARD_TABLES", "Scorecard", "headline_kpis", "score_run"]
+
+#: Names of the tables of :meth:`Scorecard.tables` (files ``<name>.csv/.md/.tex`` of ``write_tables``).
+SCORECARD_TABLES: tuple[str, ...] = (
+    "thresholds", "table_v_detection", "detection_by_band", "table_vi_diagnosis", "classification", "confusion",
+    "delays", "delay_summary", "summary_components", "headline",
+)
 
 #: Headline KPIs: name -> True when higher is better.
 HEADLINE_KPIS: dict[str, bool] = {
@@ -91,13 +97,11 @@ class Scorecard:
         return rows.iloc[0]
 
     def tables(self) -> dict[str, pd.DataFrame]:
-        """Every table by file-friendly name (for :func:`write_tables`)."""
-        return {"thresholds": self.thresholds, "table_v_detection": self.detection,
-                "detection_by_band": self.detection_by_band, "table_vi_diagnosis": self.diagnosis,
-                "classification": self.classification, "confusion": self.confusion,
-                "delays": self.delays, "delay_summary": self.delay_summary,
-                "summary_components": self.summary_components,
-                "headline": headline_kpis(self).rename("value").rename_axis("kpi").reset_index()}
+        """Every table by file-friendly name (:data:`SCORECARD_TABLES`, for :func:`write_tables`)."""
+        return dict(zip(SCORECARD_TABLES, (
+            self.thresholds, self.detection, self.detection_by_band, self.diagnosis, self.classification,
+            self.confusion, self.delays, self.delay_summary, self.summary_components,
+            headline_kpis(self).rename("value").rename_axis("kpi").reset_index())))
 
 
 def headline_kpis(scorecard: Scorecard) -> pd.Series:
