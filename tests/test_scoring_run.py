@@ -190,3 +190,36 @@ def test_run_is_frozen_and_copies_scores():
 def test_config_validation(kwargs, match):
     with pytest.raises(ParameterError, match=match):
         ScoringConfig(**kwargs)
+
+
+def test_undefined_headline_kpis_say_why():
+    """score printed 'fpr_paper_def_thr nan' with no reason when every score was equal."""
+    from fuelhm_bench.scoring import headline_kpis, score_run, undefined_kpis
+
+    labels = fleet_labels()
+    card = score_run(Run(labels, null_decisions(labels), healthy_scores=[0.0, 0.0, 0.0]))
+    kpis, why = headline_kpis(card), undefined_kpis(card)
+    assert set(why) == {k for k, v in kpis.items() if v != v} and "fpr_paper_def_thr" in why
+    assert why["fpr_paper_def_thr"].startswith("no detection: FP + FD = 0 at A = 2 (threshold mu + A sigma = 0)")
+    assert "the 3 calibration scores are all equal (sigma = 0)" in why["fpr_paper_def_thr"]
+    healthy = make_labels([{"unit": "u0", "n": 5}])
+    card = score_run(Run(healthy, null_decisions(healthy), healthy_scores=[0.0, 1.0]))
+    assert undefined_kpis(card)["summary_score"].startswith("no scored flight is faulty")
+    assert undefined_kpis(card)["fnr_standard_thr"].startswith("no detectable faulty flight at A = 2")
+
+
+def test_huge_scores_are_scored_without_overflow():
+    """Scores x 1e300 overflowed in the healthy model's square (a raw numpy RuntimeWarning, then NaN KPIs)."""
+    import warnings
+
+    from fuelhm_bench.scoring import fit_healthy_model, headline_kpis, score_run
+
+    labels = fleet_labels()
+    decisions = perfect_decisions(labels)
+    decisions["score"] = decisions["score"] * 1e300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model = fit_healthy_model(np.linspace(0.0, 1.0, 50) * 1e300)
+        card = score_run(Run(labels, decisions, healthy_scores=np.linspace(0.0, 1.0, 50) * 1e300))
+    assert np.isfinite([model.mu, model.sigma]).all() and model.mu == pytest.approx(0.5e300)
+    assert headline_kpis(card)["summary_score"] == 100.0

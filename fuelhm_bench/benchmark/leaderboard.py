@@ -252,7 +252,7 @@ def evaluate_task(task: Task, *, limits: dict, method_seed: int = 0, cache_dir=N
     """Run one task sealed, score it; returns ``(record, tables)`` for the store (never raises for the method)."""
     from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
     from fuelhm_bench.benchmark.store import provenance
-    from fuelhm_bench.scoring import headline_kpis, robustness
+    from fuelhm_bench.scoring import headline_kpis, robustness, undefined_kpis
 
     if evaluation is None:
         evaluation = prepare_evaluation(task.scenario, fidelity=task.fidelity, seed=task.seed, scale=task.scale,
@@ -286,8 +286,7 @@ def evaluate_task(task: Task, *, limits: dict, method_seed: int = 0, cache_dir=N
                     message = f"robustness not measured: nominal run {nom.status}: {nom.message}"
             kpis = {k: (None if v != v else float(v)) for k, v in kp.items()}
             if kpis.get("summary_score") is None and not message:
-                message = ("summary score undefined: no scored flight is faulty (a scenario without a degradation "
-                           "that occurs measures false alarms only)")
+                message = f"summary score undefined: {undefined_kpis(card)['summary_score']}"
         except FuelHMError as exc:
             status, message, tables = "invalid", f"{task.method}: its output cannot be scored: {exc}", {}
     record = {"key": task.key, "method": task.method,

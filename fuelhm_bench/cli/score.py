@@ -41,14 +41,17 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, out_dir) -> int:
     from fuelhm_bench.benchmark.exchange import score_decisions
-    from fuelhm_bench.scoring import headline_kpis
+    from fuelhm_bench.scoring import headline_kpis, undefined_kpis
     from fuelhm_bench.scoring.bootstrap import scorecard_intervals
 
     card = score_decisions(args.decisions, args.scenario, **scenario_kwargs(args))
     ci = scorecard_intervals(card).set_index("kpi")
+    undefined = undefined_kpis(card)
     for kpi, value in headline_kpis(card).items():
         extra = (f"  [{ci.loc[kpi, 'ci_low']:.4g}, {ci.loc[kpi, 'ci_high']:.4g}]"
                  if kpi in ci.index and ci.loc[kpi, "ci_low"] == ci.loc[kpi, "ci_low"] else "")
+        if kpi in undefined:
+            extra = f"  (undefined: {undefined[kpi]})"
         print(f"{kpi:28s} {value:.4g}{extra}")
     if out_dir is not None:
         from fuelhm_bench.scoring import write_tables

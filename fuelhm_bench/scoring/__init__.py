@@ -51,7 +51,8 @@ _HOMES = {  # public name -> its module: imported on first use (PEP 562), so tha
     **dict.fromkeys(('degradation_summary', 'drift_sweep_table', 'error_rate_changes', 'robustness', 'robustness_table'), "robustness"),
     **dict.fromkeys(('cd_diagram', 'critical_difference', 'friedman_test', 'mean_ranks', 'rank_matrix', 'wilcoxon_holm'), "ranking"),
     **dict.fromkeys(('HEALTHY', 'LABEL_COLUMNS', 'MULTIPLE', 'NO_ALARM', 'TIE', 'Run', 'flight_table'), "run"),
-    **dict.fromkeys(('HEADLINE_KPIS', 'SCORECARD_TABLES', 'Scorecard', 'headline_kpis', 'score_run'), "scorecard"),
+    **dict.fromkeys(('HEADLINE_KPIS', 'SCORECARD_TABLES', 'Scorecard', 'headline_kpis', 'score_run', 'undefined_kpis'),
+                    "scorecard"),
     **dict.fromkeys(('summary_components', 'summary_score'), "summary"),
     **dict.fromkeys(('HealthyScoreModel', 'fit_healthy_model', 'threshold_table'), "thresholds"),
 }
@@ -67,7 +68,7 @@ __all__ = [
     "flight_table", "headline_kpis", "maintenance_cost", "null_decisions", "perfect_decisions",
     "plot_score_distributions", "rates_with_intervals", "robustness", "robustness_table",
     "degradation_summary", "drift_sweep_table", "error_rate_changes",
-    "save_figure", "score_run", "summary_components", "summary_score", "threshold_table",
+    "save_figure", "score_run", "undefined_kpis", "summary_components", "summary_score", "threshold_table",
     "to_latex", "to_markdown", "total_cost", "wilson_interval", "write_tables",
 ]
 

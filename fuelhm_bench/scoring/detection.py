@@ -30,7 +30,7 @@ from fuelhm_bench.scoring.run import HEALTHY, MULTIPLE
 from fuelhm_bench.scoring.thresholds import HealthyScoreModel
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["ALL_MODES", "METHOD_ALARM", "detection_by_band", "detection_table", "modes_present",
+__all__ = ["ALL_MODES", "METHOD_ALARM", "UNDEFINED_RATES", "detection_by_band", "detection_table", "modes_present",
            "operating_points"]
 
 #: ``mode`` value of the rows pooling every flight.
@@ -47,11 +47,12 @@ _RATES = {
     "fnr_paper_def": ("fn", "n_not_detected"),
     "incipient_detection_rate": ("n_incipient_detected", "n_incipient"),
 }
-_UNDEFINED = {
-    "fpr_standard": "fpr_standard undefined (no healthy flight)",
-    "fnr_standard": "fnr_standard undefined (no detectable faulty flight)",
-    "fpr_paper_def": "fpr_paper_def undefined (no detection: FP + FD = 0)",
-    "fnr_paper_def": "fnr_paper_def undefined (every flight detected: FN + NFD = 0)",
+#: Why each rate is undefined (NaN) where it is: its denominator is 0.
+UNDEFINED_RATES = {
+    "fpr_standard": "no healthy flight",
+    "fnr_standard": "no detectable faulty flight",
+    "fpr_paper_def": "no detection: FP + FD = 0",
+    "fnr_paper_def": "every flight detected: FN + NFD = 0",
 }
 
 
@@ -122,7 +123,7 @@ def _unit_counts(flights: pd.DataFrame, points, modes: list[str]) -> pd.DataFram
 def _notes(table: pd.DataFrame) -> list[str]:
     notes = []
     for _, row in table.iterrows():
-        parts = [text for rate, text in _UNDEFINED.items() if np.isnan(row[rate])]
+        parts = [f"{rate} undefined ({why})" for rate, why in UNDEFINED_RATES.items() if np.isnan(row[rate])]
         notes.append("; ".join(parts))
     return notes
 

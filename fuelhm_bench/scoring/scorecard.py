@@ -10,7 +10,7 @@ import pandas as pd
 from fuelhm_bench.errors import UnknownNameError
 from fuelhm_bench.scoring.config import ScoringConfig
 from fuelhm_bench.scoring.delay import delay_summary, detection_delays
-from fuelhm_bench.scoring.detection import (ALL_MODES, METHOD_ALARM, detection_by_band,
+from fuelhm_bench.scoring.detection import (ALL_MODES, METHOD_ALARM, UNDEFINED_RATES, detection_by_band,
                                             detection_table)
 from fuelhm_bench.scoring.diagnosis import (classification_table, confusion_matrix,
                                             diagnosis_table)
@@ -18,7 +18,7 @@ from fuelhm_bench.scoring.run import Run, flight_table
 from fuelhm_bench.scoring.summary import summary_components, summary_score
 from fuelhm_bench.scoring.thresholds import HealthyScoreModel, fit_healthy_model, threshold_table
 
-__all__ = ["HEADLINE_KPIS", "SCORECARD_TABLES", "Scorecard", "headline_kpis", "score_run"]
+__all__ = ["HEADLINE_KPIS", "SCORECARD_TABLES", "Scorecard", "headline_kpis", "score_run", "undefined_kpis"]
 
 #: Names of the tables of :meth:`Scorecard.tables` (files ``<name>.csv/.md/.tex`` of ``write_tables``).
 SCORECARD_TABLES: tuple[str, ...] = (
@@ -135,6 +135,57 @@ def headline_kpis(scorecard: Scorecard) -> pd.Series:
         "summary_score": scorecard.summary_score,
     }
     return pd.Series({k: float(values[k]) for k in HEADLINE_KPIS}, dtype=float)
+
+
+#: Why the summary score is undefined (NaN): it averages over the faulty flights.
+NO_FAULT = "no scored flight is faulty (a scenario without a degradation that occurs measures false alarms only)"
+
+
+def _rate_reason(scorecard: Scorecard, rate: str, operating_point: str) -> str:
+    """Why ``rate`` (or ``balanced_accuracy``) of the ``"all"`` row at ``operating_point`` is undefined."""
+    row = scorecard.detection_row(operating_point)
+    rates = ("fpr_standard", "fnr_standard") if rate == "balanced_accuracy" else (rate,)
+    why = "; ".join(UNDEFINED_RATES[r] for r in rates if r in UNDEFINED_RATES and row[r] != row[r])
+    if operating_point == METHOD_ALARM:
+        return f"{why} among the method's alarms"
+    model = scorecard.healthy_model
+    where = f"{why} at A = {row['a']:g} (threshold mu + A sigma = {row['threshold']:.4g})"
+    if model.sigma == 0:
+        where += (f"; the {model.n} calibration scores are all equal (sigma = 0), so every threshold is their "
+                  f"value mu = {model.mu:.4g}")
+    return where
+
+
+def undefined_kpis(scorecard: Scorecard) -> dict[str, str]:
+    """Why each undefined (NaN) headline KPI of a run is undefined.
+
+    Parameters
+    ----------
+    scorecard : Scorecard
+
+    Returns
+    -------
+    dict of str to str
+        ``{kpi: reason}`` for the NaN values of :func:`headline_kpis`, e.g.
+        ``{"fpr_paper_def_thr": "no detection: FP + FD = 0 at A = 2 (threshold ...)"}``;
+        empty when every KPI is defined.
+    """
+    cfg = scorecard.config
+    reasons = {}
+    for kpi, value in headline_kpis(scorecard).items():
+        if value == value:
+            continue
+        stem, _, point = kpi.rpartition("_")
+        if point in ("thr", "alarm") and stem:
+            op = cfg.operating_point_name(cfg.headline_a) if point == "thr" else METHOD_ALARM
+            reasons[kpi] = _rate_reason(scorecard, stem, op)
+        elif kpi in ("fcr", "classification_accuracy"):
+            reasons[kpi] = "no flight with a single fault is alarmed, so no diagnosis is scored"
+        elif kpi == "summary_score":
+            reasons[kpi] = NO_FAULT
+        else:  # the detected event fraction and the delays
+            reasons[kpi] = "no degradation event among the scored flights"
+    return reasons
 
 
 def score_run(run: Run, config: ScoringConfig | None = None) -> Scorecard:

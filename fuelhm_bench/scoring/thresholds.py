@@ -65,12 +65,18 @@ def fit_healthy_model(healthy_scores: Any) -> HealthyScoreModel:
     >>> m = fit_healthy_model([1.0, 2.0, 3.0])
     >>> round(m.threshold(2), 4)
     3.633
+    >>> fit_healthy_model([1e308, -1e308]).sigma  # no overflow
+    1e+308
     """
     s = np.asarray(healthy_scores, dtype=float).ravel()
     if s.size < 2 or not np.all(np.isfinite(s)):
         raise DataFormatError(f"The 'healthy_scores' parameter of fit_healthy_model must hold at "
                               f"least 2 finite scores. Got {s.size} scores instead.")
-    return HealthyScoreModel(mu=float(s.mean()), sigma=float(s.std(ddof=0)), n=int(s.size))
+    # Computed on the scores divided by the largest |score|: scores near the float range (1e300) would
+    # overflow in the sum and the squares (a numpy RuntimeWarning, then mu or sigma = inf).
+    scale = float(np.max(np.abs(s))) or 1.0
+    unit = s / scale
+    return HealthyScoreModel(mu=scale * float(unit.mean()), sigma=scale * float(unit.std(ddof=0)), n=int(s.size))
 
 
 def threshold_table(model: HealthyScoreModel, a_values: Sequence[float]) -> pd.DataFrame:
