@@ -74,12 +74,21 @@ def test_export_refuses_to_overwrite(exported):
     (lambda d: d.assign(alarm=["maybe"] + list(d["alarm"][1:])), r"line 2: column 'alarm' must be"),
     (lambda d: d.assign(score=["nan"] + list(d["score"][1:])), r"line 2: column 'score' must be a finite number. "
                                                               r"Got 'nan' instead"),
-    (lambda d: d.assign(flight_index=[1.5] + list(d["flight_index"][1:])), r"'flight_index' must be an integer >= 0. "
+    (lambda d: d.assign(flight_index=[1.5] + list(d["flight_index"][1:])), r"'flight_index' must be an integer >= 0 "
+                                                                          r"\(the flight_index of test\.parquet\)\. "
                                                                           r"Got 1\.5 instead"),
     (lambda d: d.assign(**{GUILT_COLUMNS[0]: [2.0] + [0.0] * (len(d) - 1)}), r"must be a number in \[0, 1\]. Got "
                                                                             r"2\.0 instead"),
     (lambda d: d[d["split"] == "test"], r"at least 2 'calibration' flights"),
-    (lambda d: d.iloc[1:], r"must cover the same flights.* of unit \d+\.$"),  # 0, not np.int64(0)
+    (lambda d: d.iloc[1:], r"1 scored flight\(s\) have no 'test' row, e.g. flight \d+ of unit \d+;"),  # 0, not np.int64
+    # unit_id 0.5 gave a pandas merge message; unit 999 only "1 flight(s) missing from decisions"
+    (lambda d: d.assign(unit_id=[0.5] + list(d["unit_id"][1:])), r"line 2: column 'unit_id' must be an integer >= 0 "
+                                                                  r"\(the unit_id of test.parquet\). Got 0\.5 instead"),
+    (lambda d: d.assign(unit_id=[999] + list(d["unit_id"][1:])), r"line 2: column 'unit_id' names 1 unit\(s\) the "
+                                                                  r"scenario does not have: \[999\]; the scored fleet "
+                                                                  r"has \d+ unit\(s\)"),
+    (lambda d: d.assign(flight_index=[99] + list(d["flight_index"][1:])), r"line 2: column 'flight_index' must be a "
+                                                                          r"scored flight of unit \d+, 0 to \d+\. Got 99"),
 ])
 def test_bad_decisions_file_is_named(exported, tmp_path, edit, match):
     scenario, out = exported
@@ -89,6 +98,16 @@ def test_bad_decisions_file_is_named(exported, tmp_path, edit, match):
     with pytest.raises(DataFormatError, match=match) as err:
         score_decisions(bad, scenario, flight_minutes=2.0)
     assert "bad.csv" in str(err.value) and "np." not in str(err.value)
+
+
+def test_cli_says_why_a_kpi_is_undefined(exported, tmp_path, capsys):
+    """Every score equal: 'fpr_paper_def_thr nan' was printed with no reason."""
+    scenario, out = exported
+    flat = pd.read_csv(_perfect_file(out, tmp_path / "good.csv")).assign(score=0.0, alarm=0)
+    flat.to_csv(tmp_path / "flat.csv", index=False)
+    assert main(["score", str(tmp_path / "flat.csv"), "--scenario", str(scenario), "--minutes", "2"]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("fpr_paper_def_thr"))
+    assert "nan  (undefined: no detection: FP + FD = 0 at A = 2" in line and "are all equal (sigma = 0)" in line
 
 
 def test_missing_file_and_cli_error(tmp_path, capsys):

@@ -21,7 +21,7 @@ from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
 from fuelhm_bench.scoring.run import LABEL_COLUMNS
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["DECISION_FILE_COLUMNS", "export_scenario", "read_decisions", "scenario_tables",
+__all__ = ["DECISION_FILE_COLUMNS", "check_flights", "export_scenario", "read_decisions", "scenario_tables",
            "score_decisions"]
 
 #: Required columns of a decisions file (``guilt_<mode>`` are optional: zeros when absent).
@@ -243,6 +243,11 @@ def _write_raw(config, path: Path, progress) -> Path:
 
 
 # --------------------------------------------------------------------------- decisions
+#: Said with every mismatch between a decisions file and the scenario's flights.
+SAME_OPTIONS = ("Score with the --scenario, --fidelity, --seed, --scale and --minutes given to 'fuelhm-bench "
+                "export'.")
+
+
 def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
     """Read and validate a decisions file (Parquet, CSV or CSV.gz, by its suffix).
 
@@ -258,6 +263,12 @@ def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
     DataFormatError
         Naming the file, the column and the first bad row (1-based line of a CSV).
     """
+    test, healthy, _ = _read_decisions(path)
+    return test.reset_index(drop=True), healthy
+
+
+def _read_decisions(path):
+    """:func:`read_decisions`, the ``test`` rows indexed by their row in the file, and ``line(row)``."""
     from fuelhm_bench.io.tables import read_table, table_format
 
     path = Path(path)
@@ -282,17 +293,17 @@ def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
         i = int(np.flatnonzero(bad)[0])
         raise DataFormatError(f"{path}, {line(i)}: column 'split' must be 'test' or "
                               f"'calibration'. Got {show_value(frame['split'].iloc[i])} instead.")
-    for col in ("flight_index", "score"):
+    for col in ("unit_id", "flight_index", "score"):
         values = pd.to_numeric(frame[col], errors="coerce")
         bad = ~np.isfinite(values.to_numpy(dtype=float))
-        if col == "flight_index":
+        if col != "score":
             bad |= (values.fillna(-1) < 0).to_numpy() | (values.fillna(0) % 1 != 0).to_numpy()
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            what = "an integer >= 0" if col == "flight_index" else "a finite number"
+            what = f"an integer >= 0 (the {col} of test.parquet)" if col != "score" else "a finite number"
             raise DataFormatError(f"{path}, {line(i)}: column {col!r} must be {what}. Got "
                                   f"{show_value(frame[col].iloc[i])} instead.")
-        frame[col] = values.astype(np.int64 if col == "flight_index" else np.float64)
+        frame[col] = values.astype(np.float64 if col == "score" else np.int64)
     alarm_text = frame["alarm"].astype(str).str.strip()
     bad = ~alarm_text.isin(_TRUE | _FALSE)
     if bad.any():
@@ -312,22 +323,65 @@ def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
             raise DataFormatError(f"{path}, {line(i)}: column {col!r} must be a number in [0, 1]. "
                                   f"Got {show_value(frame[col].iloc[i])} instead.")
         frame[col] = values
-    unit = frame["unit_id"]
-    numeric = pd.to_numeric(unit, errors="coerce")
-    frame["unit_id"] = numeric.astype(np.int64) if numeric.notna().all() and (
-        numeric % 1 == 0).all() else unit.astype(str)
-    test = frame[split == "test"].reset_index(drop=True)
+    test = frame[split == "test"].copy()
     healthy = frame.loc[split == "calibration", "score"].to_numpy(dtype=float)
     if len(healthy) < 2:
         raise DataFormatError(f"{path}: the decisions file must hold the scores of at least 2 "
                               f"'calibration' flights (the held-out healthy training units of "
                               f"training.parquet); they set the thresholds mu + A sigma. Got "
                               f"{len(healthy)} instead.")
-    guilt = test[list(GUILT_COLUMNS)].to_numpy(dtype=float)
+    guilt = test[list(GUILT_COLUMNS)].to_numpy(dtype=float, copy=True)
     no_guilt = test["alarm"].to_numpy() & (guilt.sum(axis=1) == 0)
     guilt[no_guilt] = 1.0 / len(MODE_IDS)  # an alarm without a diagnosis: uniform guilt
     test[list(GUILT_COLUMNS)] = guilt
-    return test[list(DECISION_COLUMNS)], healthy
+    return test[list(DECISION_COLUMNS)], healthy, line
+
+
+def check_flights(decisions: pd.DataFrame, labels: pd.DataFrame, path, line) -> None:
+    """Refuse ``test`` rows that name a unit or flight the scenario's scored fleet does not have, or miss one.
+
+    Parameters
+    ----------
+    decisions : pandas.DataFrame
+        The ``test`` rows, indexed by their row in the file.
+    labels : pandas.DataFrame
+        The scored flights (``unit_id``, ``flight_index``).
+    path : path-like
+        The decisions file, named in messages.
+    line : callable
+        Row -> its place in the file (``"line 7"``).
+
+    Raises
+    ------
+    DataFormatError
+        Naming the file, the line and column of the first unknown unit or flight (and every unknown
+        unit), or how many scored flights have no row, with the fleet's units and flights.
+    """
+    units = labels.groupby("unit_id")["flight_index"].max()
+    fleet = (f"the scored fleet has {len(units)} unit(s), {units.index.min()} to {units.index.max()}, of "
+             f"{units.max() + 1} flight(s) (flight_index 0 to {units.max()})")
+    unknown = ~decisions["unit_id"].isin(units.index)
+    if unknown.any():
+        i = decisions.index[np.flatnonzero(unknown.to_numpy())[0]]
+        named = sorted(set(decisions.loc[unknown, "unit_id"].tolist()))
+        raise DataFormatError(f"{path}, {line(i)}: column 'unit_id' names {len(named)} unit(s) the scenario does "
+                              f"not have: {show_value(named)}; {fleet}. {SAME_OPTIONS}")
+    keys = ["unit_id", "flight_index"]
+    given = pd.MultiIndex.from_frame(decisions[keys])
+    scored = pd.MultiIndex.from_frame(labels[keys])
+    extra = ~given.isin(scored)
+    if extra.any():
+        i = decisions.index[np.flatnonzero(extra)[0]]
+        unit, k = decisions.loc[i, "unit_id"], decisions.loc[i, "flight_index"]
+        raise DataFormatError(f"{path}, {line(i)}: column 'flight_index' must be a scored flight of unit {unit}, "
+                              f"0 to {units[unit]}. Got {k} instead ({int(extra.sum())} row(s) name flights the "
+                              f"scenario does not have). {SAME_OPTIONS}")
+    missing = ~scored.isin(given)
+    if missing.any():
+        unit, k = scored[np.flatnonzero(missing)[0]]
+        raise DataFormatError(f"{path}: {int(missing.sum())} scored flight(s) have no 'test' row, e.g. flight {k} "
+                              f"of unit {unit}; the 'test' rows must cover exactly the flights of test.parquet "
+                              f"({fleet}). {SAME_OPTIONS}")
 
 
 def score_decisions(path, scenario, *, config=None, **kwargs):
@@ -354,10 +408,10 @@ def score_decisions(path, scenario, *, config=None, **kwargs):
     """
     from fuelhm_bench.scoring import Run, score_run
 
-    decisions, healthy = read_decisions(path)
+    decisions, healthy, line = _read_decisions(path)
     labels = scenario_tables(scenario, **kwargs).labels
-    if decisions["unit_id"].dtype != labels["unit_id"].dtype:
-        decisions["unit_id"] = decisions["unit_id"].astype(labels["unit_id"].dtype, errors="ignore")
+    check_flights(decisions, labels, path, line)
+    decisions = decisions.reset_index(drop=True)
     try:
         run = Run(labels=labels, decisions=decisions, healthy_scores=healthy, name=Path(path).stem)
     except DataFormatError as exc:
