@@ -79,7 +79,7 @@ def test_sweep_measures_fpr_and_fnr_changes_of_a_real_method(tiny):
     assert t.loc[-0.5, "delta_fpr"] > 0.05
     s = result.summary.iloc[0]
     assert s["degrades_at"] in (-0.05, -0.25, -0.5) and "fpr" in s["by"]
-    with pytest.raises(ParameterError, match="cannot drift"):
+    with pytest.raises(ParameterError, match=r"^DriftSweep.parameters fluid.nonexistent_pa: must be a parameter path"):
         run_drift_sweep(PaperMahalanobis(), tiny, DriftSweep(parameters=("fluid.nonexistent_pa",)), doe_units=1)
 
 
@@ -118,6 +118,30 @@ def test_commands_do_not_replace_the_users_files(tmp_path, capsys, argv, name):
     assert code == 2
     assert f"already holds {name}, not written by fuelhm-bench" in capsys.readouterr().err
     assert (out / name).read_text() == "the user's notes"
+
+
+@pytest.mark.parametrize("extra, expected", [
+    (["--parameters", "servovalve.null_bias_drift_a"],  # said "Scenario.drift[0].parameter must be ..."
+     "error: --parameters servovalve.null_bias_drift_a: must be a parameter that drift may change; not "
+     "servovalve.null_bias_drift_a, because degradation mode null_bias_drift acts on it"),
+    (["--parameters", "fluid.supply_rise_at_100pct_pa", "--change", "absolute", "--magnitudes", "1e20,2e20,3e20"],
+     "error: --magnitudes 1e+20 (absolute, on fluid.supply_rise_at_100pct_pa): must be in [-5.15e+06, 1.03e+07]"),
+    (["--parameters", "servovalve.null_bias_a", "--change", "absolute", "--magnitudes", "1e-4,2e-4,1.6e-3"],
+     "error: --magnitudes 0.0016 (absolute, on servovalve.null_bias_a): must be in [-0.00025, 0.0004]"),
+    (["--parameters", "fluid.supply_rise_at_100pct_pa", "--magnitudes", "0.1,0.2"],
+     "error: --magnitudes must be at least three distinct non-zero numbers. Got 0.1,0.2 instead."),
+])
+def test_drift_sweep_names_its_options_and_checks_them_first(tmp_path, capsys, extra, expected):
+    """Refused before anything runs or is created, in the command line's terms, by the scenario's drift rules."""
+    from fuelhm_bench.cli import main
+
+    out = tmp_path / "out"
+    code = main(["drift-sweep", "--method", "fuelhm_baselines.trivial:NullMethod", "--scenario", "paper_2012",
+                 *extra, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and expected in err, err
+    assert "Scenario." not in err and "DriftSweep" not in err
+    assert not out.exists()
 
 
 def test_itl_names_its_options_when_the_healthy_fleet_is_too_small(tmp_path, capsys):

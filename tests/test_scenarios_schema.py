@@ -24,6 +24,7 @@ from fuelhm_bench.scenarios import (
     SensorSpec,
     TrainingSpec,
     drift_parameter_paths,
+    drift_range,
     load_scenario_file,
 )
 
@@ -143,6 +144,31 @@ def test_drift_rules():
     s = dataclasses.replace(BASE, hidden_effects=with_lag, drift=(drift("effect.lvdt_lag.time_constant_s", value=0.5),))
     assert math.isclose(s.test_fleet_config().nominal.get("effect.lvdt_lag.time_constant_s"), 0.03)
     assert s.training_fleet_config().nominal.get("effect.lvdt_lag.time_constant_s") == 0.02
+
+
+def test_drift_stays_a_population_shift():
+    """A relative drift of 1e9 and an absolute one of 1e20 on a parameter bounded only below, and the full
+    null-bias fault as a drift of the static null bias, were all valid."""
+    drift = lambda path, change, value: DriftSpec(parameter=path, change=change, value=value)  # noqa: E731
+    (p,) = problems(drift=(drift("fluid.supply_rise_at_100pct_pa", "relative", 1e9),))
+    assert p[0] == "drift[0].value"
+    assert p[1].startswith("Scenario.drift[0].value must be in [-0.5, 1] (relative drift of "
+                           "fluid.supply_rise_at_100pct_pa), to keep it within a factor 2 of its nominal value 1.03e+07")
+    assert p[1].endswith("Got 1000000000.0 instead. It would set fluid.supply_rise_at_100pct_pa from 1.03e+07 to "
+                         "1.03e+16.")
+    (p,) = problems(drift=(drift("fluid.supply_rise_at_100pct_pa", "absolute", 1e20),))
+    assert "must be in [-5.15e+06, 1.03e+07] (absolute drift" in p[1]
+    (p,) = problems(drift=(drift("servovalve.null_bias_a", "absolute", LAWS["null_bias_drift"].delta),))
+    assert "must be in [-0.00025, 0.0004] (absolute drift of servovalve.null_bias_a)" in p[1]
+    assert "it adds to servovalve.null_bias_drift_a, so a larger drift is the null_bias_drift fault" in p[1]
+    (p,) = problems(drift=(drift("driver.offset_a", "absolute", -1e-3),))
+    assert "must be in [-0.0004, 0.0004] (absolute drift of driver.offset_a)" in p[1]
+    # The bounds themselves are allowed, and so are the shipped robustness_drift's drifts.
+    assert problems(drift=(drift("fluid.supply_rise_at_100pct_pa", "relative", -0.5),
+                           drift("servovalve.null_bias_a", "absolute", 4e-4),
+                           drift("servovalve.spool_time_constant_s", "relative", 1.0))) == []
+    assert drift_range("fluid.density_kg_m3", 800.0)[:2] == (400.0, 1600.0)
+    assert drift_range("servovalve.lap_m", 0.0)[:2] == (-math.inf, math.inf)  # the physics bounds it
 
 
 def test_drift_paths_exclude_degradation_parameters():

@@ -25,7 +25,7 @@ import pandas as pd
 
 from fuelhm_bench.errors import FuelHMError, MethodError, ParameterError
 
-__all__ = ["DriftSweep", "DriftSweepResult", "run_drift_sweep"]
+__all__ = ["DriftSweep", "DriftSweepResult", "check_sweep", "run_drift_sweep"]
 
 _CHANGES = ("relative", "absolute")
 
@@ -41,7 +41,9 @@ class DriftSweep:
         ``"fluid.supply_rise_at_100pct_pa"``), at least one.
     magnitudes : tuple of float, default=(0.05, 0.1, 0.2)
         At least three distinct non-zero values: fractions for ``relative`` (new = nominal
-        x (1 + m), m > -1), SI units for ``absolute`` (new = nominal + m).
+        x (1 + m), m > -1), SI units for ``absolute`` (new = nominal + m). Each drift must also pass the
+        scenario's drift rules (:func:`check_sweep`: within a factor 2 of the nominal value, and a
+        parameter that adds to a degradation mode's within a quarter of that mode's full change).
     change : {"relative", "absolute"}, default="relative"
     tolerance : float, default=0.05
         Degradation threshold of the summary: a rise of the FPR or the FNR by more than this
@@ -56,14 +58,14 @@ class DriftSweep:
     def __post_init__(self) -> None:
         params = tuple(self.parameters) if not isinstance(self.parameters, str) else None
         if not params or not all(isinstance(p, str) and p for p in params) or len(set(params)) != len(params):
-            raise ParameterError(f"The 'parameters' parameter of DriftSweep must be a non-empty tuple of distinct "
+            raise ParameterError(f"The 'parameters' parameter of DriftSweep must be a non-empty list of distinct "
                                  f"parameter paths. Got {self.parameters!r} instead.")
         try:
             mags = tuple(float(m) for m in self.magnitudes)
         except (TypeError, ValueError):
             mags = ()
         if len(set(mags)) < 3 or any(m == 0.0 or m != m for m in mags):
-            raise ParameterError(f"The 'magnitudes' parameter of DriftSweep must hold at least three distinct "
+            raise ParameterError(f"The 'magnitudes' parameter of DriftSweep must be at least three distinct "
                                  f"non-zero numbers. Got {self.magnitudes!r} instead.")
         if self.change not in _CHANGES:
             raise ParameterError(f"The 'change' parameter of DriftSweep must be one of {list(_CHANGES)}. "
@@ -126,6 +128,57 @@ class DriftSweepResult:
         return "\n".join(lines)
 
 
+#: How :func:`check_sweep` names the sweep's fields by default (the command line passes its options).
+API_NAMES = {"parameters": "DriftSweep.parameters", "magnitudes": "DriftSweep.magnitudes"}
+
+
+def check_sweep(sweep: DriftSweep, scenario, *, names: dict | None = None):
+    """The scenario without its own drift, once every swept drift passes the scenario's drift rules.
+
+    Each ``(parameter, magnitude)`` is checked as a scenario ``drift`` entry would be (one definition:
+    :meth:`fuelhm_bench.scenarios.Scenario` validation, :func:`fuelhm_bench.scenarios.schema.drift_range`),
+    before anything is simulated.
+
+    Parameters
+    ----------
+    sweep : DriftSweep
+    scenario : str, Path or Scenario
+    names : dict or None, default=None
+        How messages name the sweep's ``parameters`` and ``magnitudes`` (default :data:`API_NAMES`;
+        the command line gives ``{"parameters": "--parameters", "magnitudes": "--magnitudes"}``).
+
+    Returns
+    -------
+    Scenario
+
+    Raises
+    ------
+    ParameterError
+        Naming the parameter or magnitude as the user gave it, what is allowed and why.
+    """
+    from fuelhm_bench.errors import ScenarioValidationError
+    from fuelhm_bench.scenarios import load_scenario
+
+    names = {**API_NAMES, **(names or {})}
+    sc = load_scenario(scenario) if not hasattr(scenario, "test_fleet_config") else scenario
+    sc = dataclasses.replace(sc, drift=())
+    for (parameter, magnitude), spec in sweep.specs():
+        try:
+            dataclasses.replace(sc, drift=(spec,))
+        except ScenarioValidationError as exc:
+            problem = exc.problems[0]
+            if problem.field.endswith(".parameter"):
+                where = f"{names['parameters']} {parameter}"
+            else:
+                where = f"{names['magnitudes']} {magnitude:g} ({sweep.change}, on {parameter})"
+            hint = f" {problem.hint}" if problem.hint else ""
+            raise ParameterError(f"{where}: must be {problem.allowed}.{hint}") from None
+        except FuelHMError as exc:
+            raise ParameterError(f"{names['parameters']} {parameter}, {names['magnitudes']} {magnitude:g}: "
+                                 f"{exc}") from None
+    return sc
+
+
 def run_drift_sweep(method, scenario, sweep: DriftSweep | None = None, *, scale: float = 1.0, doe_units: int = 6,
                     seed: int | None = None, random_state: int = 0, timeout_s: float = 600.0,
                     progress: Callable[[int], object] | None = None, cache_dir=None) -> DriftSweepResult:
@@ -169,22 +222,13 @@ def run_drift_sweep(method, scenario, sweep: DriftSweep | None = None, *, scale:
     """
     from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
     from fuelhm_bench.datasets.cache import KnowledgeSize
-    from fuelhm_bench.scenarios import load_scenario
     from fuelhm_bench.scoring import degradation_summary, drift_sweep_table
 
     sweep = DriftSweep() if sweep is None else sweep
     if not isinstance(sweep, DriftSweep):
         raise ParameterError(f"The 'sweep' parameter of run_drift_sweep must be a DriftSweep. Got {sweep!r} instead.")
-    sc = load_scenario(scenario) if not hasattr(scenario, "test_fleet_config") else scenario
-    sc = dataclasses.replace(sc, drift=())
+    sc = check_sweep(sweep, scenario)  # fail before simulating anything
     specs = sweep.specs()
-    truth = sc.truth_model()
-    for key, spec in specs:  # fail before simulating anything
-        try:
-            spec.apply(truth)
-            dataclasses.replace(sc, drift=(spec,))  # the scenario's own drift rules (no degradation parameter)
-        except FuelHMError as exc:
-            raise ParameterError(f"DriftSweep cannot drift {key[0]} by {key[1]:g} ({sweep.change}): {exc}") from None
     common = {"fidelity": "physics", "seed": seed, "scale": scale, "robustness": False,
               "knowledge_size": KnowledgeSize(doe_units=doe_units), "progress": progress, "cache_dir": cache_dir}
 

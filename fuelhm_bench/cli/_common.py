@@ -230,6 +230,9 @@ FIELD_OPTIONS: dict[str, tuple] = {
     "DiscrepancyConfig.candidates": ("--candidates", _same, "", False),
     "DiscrepancyConfig.seed": ("--seed", _same, "", False),
     "CalibrationConfig.seed": ("--seed", _same, "", False),
+    "DriftSweep.parameters": ("--parameters", _same, "", False),
+    "DriftSweep.magnitudes": ("--magnitudes", _same, "", False),
+    "DriftSweep.tolerance": ("--tolerance", _same, "", False),
 }
 
 _TEMPLATE = re.compile(r"^The '(?P<name>[^']+)' parameter(?: of (?P<owner>[A-Za-z_][\w.]*))? must be "
@@ -287,7 +290,9 @@ def option_message(message: str, args: argparse.Namespace) -> str:
     typed = getattr(args, dest)
     typed = ",".join(map(str, typed)) if isinstance(typed, (list, tuple)) else typed
     converted = _convert_allowed(m["allowed"], convert, unit, decreasing)
-    if converted is None:
+    if converted is None and convert is _same and not unit:  # the option is the field itself: its words apply
+        converted = m["allowed"]
+    elif converted is None:
         converted = f"such that {name} is {m['allowed']} (it was {m['given']})"
     shown = f"{typed:g}" if isinstance(typed, float) else str(typed)
     return f"{option} must be {converted}. Got {shown} instead.{m['rest']}"

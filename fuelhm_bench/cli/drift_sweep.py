@@ -47,21 +47,22 @@ OUTPUT_FILES = ("drift_sweep.csv", "drift_summary.csv", "drift_sweep.md", "drift
 
 
 def run(args: argparse.Namespace) -> int:
-    from fuelhm_bench.benchmark.drift_sweep import DriftSweep, run_drift_sweep
+    from fuelhm_bench.benchmark.drift_sweep import DriftSweep, check_sweep, run_drift_sweep
     from fuelhm_bench.errors import ParameterError
     from fuelhm_bench.benchmark.loading import parse_params
     from fuelhm_bench.methods.loading import load_method
 
-    out = check_output_dir(args.out)
-    refuse_foreign(out, OUTPUT_FILES, force=args.force)
-    claim(out, OUTPUT_FILES)  # (before writing: a failed run leaves nothing of the user's unprotected)
     try:
         magnitudes = tuple(float(x) for x in args.magnitudes.split(","))
     except ValueError:
         raise ParameterError(f"--magnitudes must be comma-separated numbers. Got '{args.magnitudes}'.") from None
     parameters = tuple(x.strip() for x in args.parameters.split(",") if x.strip())
     sweep = DriftSweep(parameters=parameters, magnitudes=magnitudes, change=args.change, tolerance=args.tolerance)
+    check_sweep(sweep, args.scenario, names={"parameters": "--parameters", "magnitudes": "--magnitudes"})
     method = load_method(args.method, parse_params(args.param))
+    out = check_output_dir(args.out)  # (after every option check: a refused command creates nothing)
+    refuse_foreign(out, OUTPUT_FILES, force=args.force)
+    claim(out, OUTPUT_FILES)  # (before writing: a failed run leaves nothing of the user's unprotected)
     with progress_bar(0, "simulating") as bar:
         def grow(n: int) -> None:
             bar.total += n

@@ -57,10 +57,6 @@ def run(args: argparse.Namespace) -> int:
 
         scenarios = [s for s in scenarios if s != "all"] + list(list_scenarios())
     ids = [resolve_scenario(s).id for s in dict.fromkeys(scenarios)]  # every name checked before anything runs
-    out = check_output_dir(args.out)
-    names = ("table.md", "table.csv", *ids)
-    refuse_foreign(out, names, force=args.force)
-    claim(out, names)
     methods = None
     if args.method:
         if len(set(args.method)) < 2:
@@ -68,6 +64,10 @@ def run(args: argparse.Namespace) -> int:
                                  f"Got {args.method} instead.")
         methods = {spec.rpartition(":")[2] if args.method.count(spec) == 1 else spec: load_method(spec)
                    for spec in dict.fromkeys(args.method)}
+    out = check_output_dir(args.out)  # (after every option check: a refused command creates nothing)
+    names = ("table.md", "table.csv", *ids)
+    refuse_foreign(out, names, force=args.force)
+    claim(out, names)
     rows = []
     for scenario in dict.fromkeys(scenarios):
         report = fidelity_check(scenario, methods=methods, seed=args.seed, scale=args.scale,

@@ -25,7 +25,7 @@ def register(sub) -> None:
                    help="highest current [mA] (default 12)")
     p.add_argument("--ramp-seconds", type=bounded(float, 0.1, 3600.0, "s"), default=60.0,
                    help="duration of each one-way ramp [s], in [0.1, 3600]")
-    p.add_argument("--cycles", type=bounded(int, 1, 100), default=1, help="up-and-down cycles (default 1)")
+    p.add_argument("--cycles", type=bounded(int, 1, 100), default=1, help="up-and-down cycles, in [1, 100] (default 1)")
     p.add_argument("--n2-pct", type=positive_float, default=82.0, help="engine speed, sets supply pressure [%%]")
     p.add_argument("--degrade", action="append", default=[], metavar="MODE:INTENSITY",
                    help="degradation intensity in [0, 1] (repeatable)")

@@ -44,12 +44,13 @@ from fuelhm_bench.scenarios.schema import (
     SensorSpec,
     TrainingSpec,
     drift_parameter_paths,
+    drift_range,
     run_budget,
 )
 
 __all__ = [
     "CostSpec", "DEFAULT_RUN_BUDGET_FLIGHT_HOURS", "DRIFT_CHANGES", "DegradationSpec", "DriftSpec", "FIDELITIES", "FleetSpec", "HiddenEffectSpec",
     "MAX_DURATION_MIN", "MAX_SEED", "MAX_FLIGHTS_PER_UNIT", "MAX_UNITS", "MissionSpec", "OperatingSpec", "Problem", "RUN_BUDGET_ENV", "RunCost", "SUPPORTED_SCHEMA_VERSIONS", "Scenario", "ScenarioValidationError",
-    "SeedSpec", "SensorSpec", "TrainingSpec", "drift_parameter_paths", "run_budget", "list_scenarios", "load_scenario",
+    "SeedSpec", "SensorSpec", "TrainingSpec", "drift_parameter_paths", "drift_range", "run_budget", "list_scenarios", "load_scenario",
     "load_scenario_file", "parse_scenario", "scenario_json_schema", "shipped_scenario_files",
 ]

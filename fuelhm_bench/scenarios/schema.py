@@ -104,6 +104,84 @@ _DRIFT_EXCLUDED: dict[str, str] = {
 }
 
 
+#: A drift keeps a parameter within this factor of its nominal value (new / nominal in [1/2, 2], i.e. a
+#: relative value in [-0.5, 1]): a shift of the population, not another design.
+MAX_DRIFT_FACTOR: float = 2.0
+#: Parameters that add to the parameter of a degradation mode (the same physical quantity) -> that mode.
+DRIFT_TWINS: dict[str, str] = {
+    "servovalve.null_bias_a": "null_bias_drift",  # total null bias = null_bias_a + null_bias_drift_a
+    "driver.offset_a": "null_bias_drift",  # coil current = gain x command + offset_a: the same shift of the null
+    "servovalve.radial_clearance_m": "radial_clearance",  # leakage height = radial clearance + corner radius
+}
+#: A twin (:data:`DRIFT_TWINS`) may drift by at most its mode's change at this intensity (the scorer's default
+#: detectable fraction, :class:`~fuelhm_bench.scoring.config.ScoringConfig`): more is the fault, unlabelled.
+MAX_TWIN_DRIFT_INTENSITY: float = 0.25
+
+
+def drift_range(parameter: str, nominal: float) -> tuple[float, float, str]:
+    """The values a drift may give ``parameter``, whose nominal value is ``nominal``, and why.
+
+    The one rule of scenario ``drift`` entries and of ``drift-sweep`` (besides the physics' own
+    bounds, checked by applying the drift): within :data:`MAX_DRIFT_FACTOR` of the nominal, and, for a
+    parameter that adds to a degradation mode's (:data:`DRIFT_TWINS`), within that mode's change at
+    intensity :data:`MAX_TWIN_DRIFT_INTENSITY`.
+
+    Parameters
+    ----------
+    parameter : str
+        Dotted parameter path (``"servovalve.null_bias_a"``).
+    nominal : float
+        Its value before the drift (SI units).
+
+    Returns
+    -------
+    low, high : float
+        Bounds of the drifted value (infinite when ``nominal`` is 0 and no mode bounds it).
+    why : str
+        The rule, for messages.
+
+    Examples
+    --------
+    >>> drift_range("fluid.supply_rise_at_100pct_pa", 1.03e7)[:2]
+    (5150000.0, 20600000.0)
+    >>> low, high, why = drift_range("servovalve.null_bias_a", 5e-4)
+    >>> round(low, 6), round(high, 6)
+    (0.0001, 0.0009)
+    """
+    low, high = sorted((nominal / MAX_DRIFT_FACTOR, nominal * MAX_DRIFT_FACTOR)) if nominal else (-math.inf, math.inf)
+    why = (f"within a factor {MAX_DRIFT_FACTOR:g} of its nominal value {nominal:g} (a drift shifts the population; "
+           f"it is not another design)")
+    mode = DRIFT_TWINS.get(parameter)
+    if mode is not None:
+        law = LAWS[mode]
+        step = MAX_TWIN_DRIFT_INTENSITY * abs(law.delta)
+        if nominal - step > low or nominal + step < high:
+            low, high = max(low, nominal - step), min(high, nominal + step)
+            why = (f"within a factor {MAX_DRIFT_FACTOR:g} of its nominal value {nominal:g} and within {step:g} of it: "
+                   f"it adds to {law.component}.{law.parameter}, so a larger drift is the {mode} fault beyond "
+                   f"intensity {MAX_TWIN_DRIFT_INTENSITY:g} ({law.delta:g} at 1), unlabelled")
+    return low, high, why
+
+
+def drift_value_problem(parameter: str, change: str, value: float, nominal: float, field: str) -> Problem | None:
+    """The :class:`Problem` of a drift that leaves :func:`drift_range`, or None.
+
+    ``field`` is the scenario field blamed (``"drift[0].value"``); the allowed range is given in the
+    units of ``value`` (a fraction for ``relative``, SI units for ``absolute``).
+    """
+    new = nominal * (1.0 + value) if change == "relative" else nominal + value
+    low, high, why = drift_range(parameter, nominal)
+    slack = 1e-12 * max(abs(low), abs(high), abs(nominal)) if math.isfinite(low) and math.isfinite(high) else 0.0
+    if low - slack <= new <= high + slack:
+        return None
+    if change == "relative":
+        a, b = sorted((low / nominal - 1.0, high / nominal - 1.0))
+    else:
+        a, b = low - nominal, high - nominal
+    return Problem(field, f"in [{a:.4g}, {b:.4g}] ({change} drift of {parameter}), to keep it {why}", show(value),
+                   f"It would set {parameter} from {nominal:g} to {new:g}.")
+
+
 def _physics_problem(exc: FuelHMError, field: str, given: object, context: str = "", *,
                      same_units: bool = False) -> Problem:
     """Turn a physics validation error into a :class:`Problem` on a scenario field.
@@ -949,6 +1027,10 @@ class Scenario(Spec):
                 new = nominal * (1.0 + d.value) if d.change == "relative" else nominal + d.value
                 problems.append(_physics_problem(exc, f"drift[{i}].value", d.value,
                                                  f"It would set {d.parameter} from {nominal:g} to {new:g}."))
+                continue
+            problem = drift_value_problem(d.parameter, d.change, d.value, nominal, f"drift[{i}].value")
+            if problem is not None:
+                problems.append(problem)
         return problems
 
     def _physics_checks(self) -> list[Problem]:
