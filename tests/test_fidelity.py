@@ -112,6 +112,20 @@ def test_cli_rejects_a_single_method(tmp_path, capsys, methods):
                  "--out", str(tmp_path / "o")])
     assert code == 2
     assert "--method must name at least two different methods" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # refused before --out is created
+
+
+def test_cli_checks_every_scenario_and_method_before_creating_out(tmp_path, capsys):
+    """fidelity ran paper_2012 to the end before refusing the next --scenario; its methods too are checked first."""
+    out = tmp_path / "o"
+    null = "fuelhm_baselines.trivial:NullMethod"
+    assert main(["fidelity", "--scenario", "paper_2012", "--scenario", "nope", "--method", null, "--method",
+                 "fuelhm_baselines.trivial:RandomMethod", "--out", str(out)]) == 2
+    assert "Unknown scenario 'nope'" in capsys.readouterr().err
+    assert main(["fidelity", "--scenario", "paper_2012", "--method", null, "--method", "no_such_module:X",
+                 "--out", str(out)]) == 2
+    assert "no_such_module" in capsys.readouterr().err
+    assert not out.exists()
 
 
 @pytest.mark.slow
