@@ -53,6 +53,8 @@ def run(capsys, *argv) -> tuple[int, str]:
     (["sweep", "--cycles", "100", "--ramp-seconds", "3600"], "error: --cycles 100 x 2 x --ramp-seconds 3600"),
     (["sweep", "--noise-um", "5", "--seed", "3"], "error: --noise-um, --seed: a sweep records the true rod position"),
     (["itl", "--intensities", "0.5,abc"], "error: --intensities must be comma-separated numbers in (0, 1]."),
+    (["itl", "--intensities", "0.5,0.5"], "error: --intensities must hold at least two distinct values in (0, 1]"),
+    (["itl", "--intensities", "1"], "error: --intensities must hold at least two distinct values in (0, 1]"),
     (["discrepancy", "f.parquet", "--candidates", "rod_frction"], "error: --candidates: unknown effect "
                                                                   "'rod_frction'."),
     (["plot-curve", "missing.parquet"], "error: The flight file 'missing.parquet' does not exist."),

@@ -105,7 +105,7 @@ def test_drift_sweep_command(tiny, tmp_path):
       "fluid.supply_rise_at_100pct_pa"], "drift_sweep.md"),
     (["fidelity", "--scenario", "paper_2012"], "table.md"),
     (["itl", "--scenario", "paper_2012", "--units", "1", "--minutes", "3", "--healthy-units", "3",
-      "--healthy-flights", "4", "--intensities", "1", "--jobs", "1"], "itl.csv"),  # refused when publishing
+      "--healthy-flights", "4", "--intensities", "0.5,1", "--jobs", "1"], "itl.csv"),  # refused when publishing
 ])
 def test_commands_do_not_replace_the_users_files(tmp_path, capsys, argv, name):
     """itl, fidelity and drift-sweep replaced a same-named file the user had in --out, without --force."""

@@ -115,7 +115,7 @@ def test_indicators_command_on_simulated_and_hand_made_csv(tmp_path, capsys):
 
 def test_itl_command_writes_laws_and_signatures(tmp_path):
     out = tmp_path / "itl"
-    assert main(["itl", "--units", "1", "--intensities", "1", "--minutes", "5", "--healthy-units", "4",
+    assert main(["itl", "--units", "1", "--intensities", "0.5,1", "--minutes", "5", "--healthy-units", "4",
                  "--healthy-flights", "3", "--out", str(out)]) == 0
     itl = pd.read_csv(out / "itl.csv")
     assert len(itl) == 70 and list(itl.columns) == ["mode", "indicator", "A", "r2", "residual_std", "n"]

@@ -19,7 +19,8 @@ def register(sub) -> None:
     p.add_argument("--scenario", default=None,
                    help="scenario name or YAML file: mission, sensor and dispersion of its training fleet")
     p.add_argument("--units", type=bounded(int, 1, 10_000), default=8, help="DOE units (default 8)")
-    p.add_argument("--intensities", default="0.25,0.5,0.75,1", help="comma-separated intensities in (0, 1]")
+    p.add_argument("--intensities", default="0.25,0.5,0.75,1",
+                   help="comma-separated intensities in (0, 1], at least two distinct (default 0.25,0.5,0.75,1)")
     p.add_argument("--minutes", type=bounded(float, 2.0, 1440.0, "min"), default=None,
                    help="flight duration [min], in [2, 1440] (default 15)")
     p.add_argument("--healthy-units", type=bounded(int, 1, 10_000), default=8, help="units of the healthy fleet (default 8)")
@@ -46,6 +47,9 @@ def run(args: argparse.Namespace) -> int:
     if not all(0.0 < x <= 1.0 for x in intensities):
         raise ParameterError(f"--intensities must be comma-separated numbers in (0, 1]. Got '{args.intensities}' "
                              "instead.")
+    if len(set(intensities)) < 2:  # (one intensity fits every law exactly through it: each R2 would read 0)
+        raise ParameterError(f"--intensities must hold at least two distinct values in (0, 1]: a law's R2 measures "
+                             f"how linear the response is across intensities. Got '{args.intensities}' instead.")
     from fuelhm_bench.taxonomy import INDICATOR_NAMES
 
     needed = len(INDICATOR_NAMES) + 1  # the healthy Gaussian model of the ten indicators
