@@ -120,6 +120,16 @@ def test_recalibration_without_transients_is_refused():
         recalibrate([flight], config=CalibrationConfig())
 
 
+def test_calibrate_command_names_the_file_without_excitation(tmp_path, capsys):
+    """Was 'Not enough excitation in the flights of the flights: ...', the file not named."""
+    sweep = tmp_path / "short_sweep.parquet"
+    assert main(["sweep", "--ramp-seconds", "1", "--out", str(sweep)]) == 0
+    assert main(["calibrate", str(sweep), "--out", str(tmp_path / "m.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {sweep}: Not enough excitation in the flights: " in err and "of the flights" not in err
+    assert not (tmp_path / "m.yaml").exists()
+
+
 def test_calibrate_command_writes_a_loadable_model_and_a_plot(perturbed, tmp_path, capsys):
     frame, _, result = perturbed
     data = write_flights(frame, tmp_path / "measured.parquet")

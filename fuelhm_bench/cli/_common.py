@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 from fuelhm_bench.io.outputs import atomic_directory  # noqa: F401 - the commands' output folders
@@ -132,6 +134,37 @@ def usable_flights(path) -> list:
                               f"is nothing to analyse. The first: {rejected[0].reason}" if rejected else
                               f"{path}: the file holds no flight.")
     return flights
+
+
+@contextlib.contextmanager
+def naming_file(path) -> Iterator[None]:
+    """Errors about the data of the file ``path`` name it.
+
+    A :class:`~fuelhm_bench.errors.DataFormatError` or :class:`~fuelhm_bench.errors.NumericalError`
+    raised in the block (the analysis of the file's flights: too little excitation, too few samples...)
+    whose message does not name the file is raised again, same class, as ``"<path>: <message>"``: the
+    user learns which file to look at. Errors about options are left alone (they name the option).
+
+    Examples
+    --------
+    >>> from fuelhm_bench.errors import DataFormatError
+    >>> with naming_file("sw.parquet"):
+    ...     raise DataFormatError("flight 0: 4 sample(s)")
+    Traceback (most recent call last):
+    fuelhm_bench.errors.DataFormatError: sw.parquet: flight 0: 4 sample(s)
+    """
+    from fuelhm_bench.errors import DataFormatError, NumericalError
+
+    try:
+        yield
+    except (DataFormatError, NumericalError) as exc:
+        if str(path) in str(exc):
+            raise
+        try:
+            renamed = type(exc)(f"{path}: {exc}")
+        except TypeError:  # a subclass with another signature
+            renamed = DataFormatError(f"{path}: {exc}")
+        raise renamed from None
 
 
 def progress_bar(total: int, desc: str, unit: str = "flight"):

@@ -31,7 +31,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.calibration.recalibrate import RECALIBRATION_PARAMETERS, CalibrationConfig, recalibrate
     from fuelhm_bench.calibration.report import calibration_summary, plot_curves
-    from fuelhm_bench.cli._common import check_output, progress_bar, usable_flights
+    from fuelhm_bench.cli._common import check_output, naming_file, progress_bar, usable_flights
     from fuelhm_bench.io.outputs import atomic_output
     from fuelhm_bench.physics.model import load_model, save_model
 
@@ -44,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
     config = CalibrationConfig(seed=args.seed)
     n_par = len(RECALIBRATION_PARAMETERS)
     # Upper bound of the replays: one per iteration plus one Jacobian (n_par replays) per iteration.
-    with progress_bar(config.max_iterations * (1 + n_par) + 1, "recalibrating", unit="replay") as bar:
+    with progress_bar(config.max_iterations * (1 + n_par) + 1, "recalibrating", unit="replay") as bar, \
+            naming_file(args.flights):
         result = recalibrate(flights, start, config=config, progress=bar.update)
     header = (f"fuelhm-bench calibrate {args.flights}: {len(flights)} flight(s), {len(result.unit_models)} unit(s)\n"
               f"gap (RMS velocity residual over the curve) {result.gap_before:.3f} -> {result.gap_fleet:.3f} mm/s "

@@ -73,7 +73,7 @@ def _run(args: argparse.Namespace, config, out_dir) -> int:
 
     from fuelhm_bench.calibration.discrepancy import find_discrepancy
     from fuelhm_bench.calibration.report import json_text, write_discrepancy_report
-    from fuelhm_bench.cli._common import progress_bar, usable_flights
+    from fuelhm_bench.cli._common import naming_file, progress_bar, usable_flights
     from fuelhm_bench.physics.model import load_model, save_model
 
     model = load_model(args.model) if args.model else None
@@ -82,7 +82,7 @@ def _run(args: argparse.Namespace, config, out_dir) -> int:
     def log(msg: str) -> None:
         print(msg, file=sys.stderr)
 
-    with progress_bar(1 + len(config.candidates), "fitting", unit="fit") as bar:
+    with progress_bar(1 + len(config.candidates), "fitting", unit="fit") as bar, naming_file(args.flights):
         result = find_discrepancy(flights, model, config=config, progress=bar.update, log=log)
     payload = result.as_json()
     if out_dir is not None:

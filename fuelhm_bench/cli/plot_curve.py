@@ -55,14 +55,10 @@ def _load(path):
 
 def _curve(f, source, annotate):
     """Raw points, smoothed curve and indicators of one flight; refuses a flight with nothing to draw."""
-    from fuelhm_bench.errors import FuelHMError
+    from fuelhm_bench.cli._common import naming_file
 
-    try:
+    with naming_file(source):  # an extraction error names the flight, not the file it came from
         return _curve_of(f, source, annotate)
-    except FuelHMError as exc:  # an extraction error names the flight, not the file it came from
-        if str(source) in str(exc):
-            raise
-        raise type(exc)(f"{source}: {exc}") from None
 
 
 def _curve_of(f, source, annotate):
