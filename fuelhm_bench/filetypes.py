@@ -11,6 +11,7 @@ table      .parquet, .csv, .csv.gz       flights, labels, decisions, indicator t
 yaml       .yaml, .yml                   scenarios, models, leaderboard files
 image      .png, .pdf, .svg              figures
 json       .json                         the scenario JSON Schema
+sqlite     .sqlite, .sqlite3, .db        the results store of evaluate / leaderboard
 =========  ============================  ==============================================
 """
 
@@ -29,6 +30,7 @@ FILE_TYPES: dict[str, tuple[str, ...]] = {
     "yaml": (".yaml", ".yml"),
     "image": (".png", ".pdf", ".svg"),
     "json": (".json",),
+    "sqlite": (".sqlite", ".sqlite3", ".db"),
 }
 
 
@@ -55,7 +57,7 @@ def check_file_type(path: str | os.PathLike[str], kind: str, *, what: str, optio
     ----------
     path : str or path-like
         The file (only its name is examined).
-    kind : {"table", "yaml", "image", "json"}
+    kind : {"table", "yaml", "image", "json", "sqlite"}
         Key of :data:`FILE_TYPES`.
     what : str
         Noun of the file in messages ("decisions file", "model file").
@@ -91,7 +93,8 @@ def check_file_type(path: str | os.PathLike[str], kind: str, *, what: str, optio
     given = f"'{given}'" if given else "no suffix"
     label = f"{option} {path}" if option else f"the {what} '{path}'"
     if writing:
-        noun = {"table": "Parquet or CSV", "yaml": "YAML", "image": "an image", "json": "JSON"}[kind]
+        noun = {"table": "Parquet or CSV", "yaml": "YAML", "image": "an image", "json": "JSON",
+                "sqlite": "an SQLite database"}[kind]
         raise error(f"{label}: the name must end in {allowed_text} (the {what} written there is {noun}). Got {given} "
                     f"instead.")
     raise error(f"Cannot tell the format of {label} from its name: the suffix must be one of "

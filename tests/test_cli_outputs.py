@@ -26,6 +26,8 @@ def run(capsys, *argv) -> tuple[int, str]:
     (["simulate", "--units", "1", "--flights", "1", "--out", "f.txt"], "--out", "f.txt", ".parquet, .csv or .csv.gz"),
     (["sweep", "--out", "s.yaml"], "--out", "s.yaml", ".parquet, .csv or .csv.gz"),
     (["schema", "--out", "schema.yaml"], "--out", "schema.yaml", ".json"),
+    (["evaluate", "--method", "fuelhm_baselines.trivial:NullMethod", "--scenario", "paper_2012", "--out", "o",
+      "--store", "store.csv"], "--store", "store.csv", ".sqlite, .sqlite3 or .db"),
 ])
 def test_output_named_for_another_type_is_refused_first(tmp_path, capsys, monkeypatch, argv, option, name, allowed):
     """calibrate wrote YAML into cal.parquet and accepted --plot c.jpg, while plot-curve refused c.jpg."""

@@ -32,7 +32,7 @@ def test_message_names_the_option_the_allowed_suffixes_and_the_given_one():
     with pytest.raises(DataFormatError, match=r"the decisions file 'd' from its name: the suffix must be one of "
                                               r"\.parquet, \.csv, \.csv\.gz\. Got no suffix instead\."):
         check_file_type("d", "table", what="decisions file")
-    assert set(FILE_TYPES) == {"table", "yaml", "image", "json"}
+    assert set(FILE_TYPES) == {"table", "yaml", "image", "json", "sqlite"}
 
 
 def test_decisions_named_txt_are_not_read_as_csv(tmp_path):

@@ -29,7 +29,8 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--log-size", type=limit_type("log_kb"), default=None, metavar="KIB",
                    help="cut each method's stdout/stderr log at this size [KiB] (default 1024)")
     g = p.add_argument_group("results store and resume")
-    g.add_argument("--store", default=None, help="SQLite results store (default: <out>/results.sqlite)")
+    g.add_argument("--store", default=None,
+                   help="SQLite results store, .sqlite, .sqlite3 or .db (default: <out>/results.sqlite)")
     g.add_argument("--rerun", action="store_true", help="evaluate again entries already in the store")
     g.add_argument("--force", action="store_true",
                    help="write into a non-empty output folder that holds no results store")
@@ -64,7 +65,11 @@ def check_results_dir(out: Path, store: str | None, force: bool) -> Path:
     from fuelhm_bench.benchmark.store import default_store_path
     from fuelhm_bench.cli._common import check_output_dir
 
+    from fuelhm_bench.filetypes import check_file_type
+
     out = Path(out)
+    if store:  # (an SQLite database is not written under another type's name, e.g. the scenario's)
+        check_file_type(store, "sqlite", what="results store", option="--store", writing=True, error=OutputPathError)
     if out.is_dir() and any(out.iterdir()) and not force:
         has_store = Path(store).is_file() if store else default_store_path(out).is_file()
         if not has_store:

@@ -151,7 +151,7 @@ def check_output_path(path: str | os.PathLike[str], *, overwrite: bool, what: st
         Noun used in messages when no option is given.
     option : str or None, default=None
         Command-line option the path came from (e.g. ``"--out"``), named in messages.
-    kind : {"table", "yaml", "image", "json"} or None, default=None
+    kind : {"table", "yaml", "image", "json", "sqlite"} or None, default=None
         Type of what is written: the name must end in one of its suffixes
         (:data:`fuelhm_bench.filetypes.FILE_TYPES`); None: any name.
     inputs : mapping of str to path-like or None, default=None
