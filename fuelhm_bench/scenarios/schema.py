@@ -145,8 +145,8 @@ def drift_range(parameter: str, nominal: float) -> tuple[float, float, str]:
     >>> drift_range("fluid.supply_rise_at_100pct_pa", 1.03e7)[:2]
     (5150000.0, 20600000.0)
     >>> low, high, why = drift_range("servovalve.null_bias_a", 5e-4)
-    >>> round(low, 6), round(high, 6)
-    (0.0001, 0.0009)
+    >>> round(low, 6), round(high, 6)  # a factor 2 below, 0.25 x 1.6 mA (null-bias drift) above
+    (0.00025, 0.0009)
     """
     low, high = sorted((nominal / MAX_DRIFT_FACTOR, nominal * MAX_DRIFT_FACTOR)) if nominal else (-math.inf, math.inf)
     why = (f"within a factor {MAX_DRIFT_FACTOR:g} of its nominal value {nominal:g} (a drift shifts the population; "
