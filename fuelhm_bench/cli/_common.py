@@ -181,7 +181,7 @@ def check_output(path: str | Path, *, force: bool, option: str = "--out", kind: 
 
     The one check of every command's output files (see
     :func:`fuelhm_bench.io.outputs.check_output_path`): named for what is written there
-    (``kind``: ``"table"``, ``"yaml"``, ``"image"`` or ``"json"``, :mod:`fuelhm_bench.filetypes`),
+    (``kind``: a key of :data:`fuelhm_bench.filetypes.FILE_TYPES`, e.g. ``"yaml"`` or ``"image"``),
     not one of the command's ``inputs`` (``{"FLIGHTS": path, "--model": path}``; even with
     ``--force``), not existing unless ``force``.
     """
