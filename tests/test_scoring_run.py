@@ -208,6 +208,18 @@ def test_undefined_headline_kpis_say_why():
     assert undefined_kpis(card)["fnr_standard_thr"].startswith("no detectable faulty flight at A = 2")
 
 
+def test_healthy_model_keeps_every_bit_of_the_direct_mean_and_std():
+    """The overflow guard scales by a power of two, so ordinary scores give the direct numpy bits
+    (a scale by max |score| changed mu or sigma in the last bit for most score sets: every threshold)."""
+    from fuelhm_bench.scoring import fit_healthy_model
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        s = rng.standard_normal(int(rng.integers(2, 300))) * 10.0 ** rng.uniform(-5, 5) + rng.uniform(-3, 3)
+        m = fit_healthy_model(s)
+        assert (m.mu, m.sigma) == (float(s.mean()), float(s.std(ddof=0)))
+
+
 def test_huge_scores_are_scored_without_overflow():
     """Scores x 1e300 overflowed in the healthy model's square (a raw numpy RuntimeWarning, then NaN KPIs)."""
     import warnings

@@ -72,9 +72,10 @@ def fit_healthy_model(healthy_scores: Any) -> HealthyScoreModel:
     if s.size < 2 or not np.all(np.isfinite(s)):
         raise DataFormatError(f"The 'healthy_scores' parameter of fit_healthy_model must hold at "
                               f"least 2 finite scores. Got {s.size} scores instead.")
-    # Computed on the scores divided by the largest |score|: scores near the float range (1e300) would
-    # overflow in the sum and the squares (a numpy RuntimeWarning, then mu or sigma = inf).
-    scale = float(np.max(np.abs(s))) or 1.0
+    # Computed on the scores divided by a power of two near the largest |score|: scores near the float
+    # range (1e300) would overflow in the sum and the squares (a numpy RuntimeWarning, then mu or sigma =
+    # inf). A power of two scales exactly, so mu and sigma keep every bit of the direct computation.
+    scale = float(np.ldexp(1.0, int(np.frexp(np.max(np.abs(s)))[1]) - 1))  # max |unit| in [1, 2)
     unit = s / scale
     return HealthyScoreModel(mu=scale * float(unit.mean()), sigma=scale * float(unit.std(ddof=0)), n=int(s.size))
 
