@@ -47,7 +47,7 @@ def problems(**changes) -> list[tuple[str, str]]:
 
 def test_minimal_scenario_in_python():
     s = Scenario(schema_version=1, name="mini", version=1, description="Tiny.",
-                 fleet=FleetSpec(units=1, flights_per_unit=1), training=TrainingSpec(units=1, flights_per_unit=1),
+                 fleet=FleetSpec(units=1, flights_per_unit=1), training=TrainingSpec(units=2, flights_per_unit=1),
                  seeds=SeedSpec(master=0))
     assert s.degradations == () and s.simultaneous and s.fidelity == "physics"
     assert s.test_fleet_config().schedules == ()
@@ -65,6 +65,7 @@ def test_fields_are_keyword_only_and_normalised():
 
 @pytest.mark.parametrize("cls, kwargs, field, allowed", [
     (FleetSpec, {"units": True, "flights_per_unit": 3}, "units", "an integer in [1, 10000]"),
+    (TrainingSpec, {"units": 1, "flights_per_unit": 3}, "units", "an integer in [2, 10000]"),  # fit != calibration
     (FleetSpec, {"units": 2, "flights_per_unit": 3.0}, "flights_per_unit", "an integer in [1, 10000]"),
     (FleetSpec, {"units": 2, "flights_per_unit": 3, "dispersion_scale": float("nan")}, "dispersion_scale",
      "a number in [0, 10]"),

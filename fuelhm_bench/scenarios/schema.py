@@ -619,12 +619,15 @@ class TrainingSpec(Spec):
     Parameters
     ----------
     units : int
-        Number of healthy training units, in [1, 10000] (manufactured with the training seed).
+        Number of healthy training units, in [2, 10000] (manufactured with the training seed). At
+        least two: the harness fits methods on the first half of the units and calibrates their
+        thresholds on the others (:func:`~fuelhm_bench.benchmark.harness.split_training`), never on
+        the units they were fitted on.
     flights_per_unit : int
         Healthy flights per training unit, in [1, 10000].
     """
 
-    units: int = option(ge=1, le=MAX_UNITS)
+    units: int = option(ge=2, le=MAX_UNITS)
     flights_per_unit: int = option(ge=1, le=MAX_FLIGHTS_PER_UNIT)
 
     @property
