@@ -133,6 +133,10 @@ def test_paper_command_small(tiny, tmp_path, capsys):
     for name in ("table_iv.csv", "table_v.csv", "table_vi.csv", "report.md", "fig4_curve.png",
                  "fig5_indicators.png", "fig8a_drift.png", "fig8b_leak.png", "fig10_scores.png"):
         assert (out / name).exists(), name
+    from fuelhm_bench.benchmark.paper_report import OUTPUT_FILES
+    from fuelhm_bench.io.outputs import MANIFEST
+
+    assert sorted(p.name for p in out.iterdir()) == sorted((*OUTPUT_FILES, MANIFEST))  # what it checks up front
     assert "Where and why the numbers differ" in (out / "report.md").read_text()
 
 

@@ -94,3 +94,24 @@ def test_a_run_again_replaces_its_own_files_but_not_the_users(tmp_path):
     with atomic_directory(out, force=True) as tmp:
         (tmp / "notes.md").write_text("replaced on purpose")
     assert (out / "notes.md").read_text() == "replaced on purpose"
+
+
+@pytest.mark.parametrize("command, module, heavy, name", [
+    (["itl", "--units", "1", "--intensities", "0.5,1", "--minutes", "2"], "fuelhm_bench.datasets.knowledge", "build_knowledge",
+     "signatures.md"),
+    (["paper", "--doe-units", "1"], "fuelhm_bench.benchmark.paper", "run_paper", "report.md"),
+])
+def test_a_users_file_is_refused_before_the_work(tmp_path, capsys, monkeypatch, command, module, heavy, name):
+    """Before, itl and paper simulated for minutes, then refused to publish over the user's file of the same name."""
+    import importlib
+
+    def never(*args, **kwargs):
+        raise AssertionError(f"{heavy} ran although the output folder was refused")
+
+    monkeypatch.setattr(importlib.import_module(module), heavy, never)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / name).write_text("the user's")
+    assert main([*command, "--out", str(out)]) == 2
+    assert f"already holds {name}, not written by fuelhm-bench; refusing" in capsys.readouterr().err
+    assert (out / name).read_text() == "the user's"

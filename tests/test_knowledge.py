@@ -117,6 +117,12 @@ def test_itl_command_writes_laws_and_signatures(tmp_path):
     out = tmp_path / "itl"
     assert main(["itl", "--units", "1", "--intensities", "0.5,1", "--minutes", "5", "--healthy-units", "4",
                  "--healthy-flights", "3", "--out", str(out)]) == 0
+    from fuelhm_bench.cli.itl import OUTPUT_FILES
+    from fuelhm_bench.io.outputs import MANIFEST
+
+    assert sorted(p.name for p in out.iterdir()) == sorted((*OUTPUT_FILES, MANIFEST))  # what it checks up front
+    assert main(["itl", "--units", "1", "--intensities", "0.5,1", "--minutes", "5", "--healthy-units", "4",
+                 "--healthy-flights", "3", "--out", str(out)]) == 0  # run again: its own files, no --force
     itl = pd.read_csv(out / "itl.csv")
     assert len(itl) == 70 and list(itl.columns) == ["mode", "indicator", "A", "r2", "residual_std", "n"]
     sig = pd.read_csv(out / "signatures.csv", index_col="mode")

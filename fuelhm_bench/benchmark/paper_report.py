@@ -93,6 +93,12 @@ def _figures(r: PaperResult, out: Path, model_paths=None) -> list[Path]:
     return paths
 
 
+#: The entries ``fuelhm-bench paper`` writes into its output folder (:func:`write_outputs`); the command
+#: checks them against the folder before the study runs.
+OUTPUT_FILES = ("table_iv.csv", "table_v.csv", "table_vi.csv", "scorer", "fig4_curve.png", "fig5_indicators.png",
+                "fig8a_drift.png", "fig8b_leak.png", "fig10_scores.png", "report.md")
+
+
 def write_outputs(r: PaperResult, out: Path, model_paths=None) -> list[Path]:
     """Write the tables, figures and report.md; returns the paths written.
 

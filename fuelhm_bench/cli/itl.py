@@ -35,6 +35,13 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+#: The files ``fuelhm-bench itl`` writes into ``--out`` (``write_knowledge`` and :func:`write_diagnosability`).
+OUTPUT_FILES = ("itl.csv", "signatures.csv", "signatures.md", "healthy_indicators.csv", "doe_indicators.csv", "itl.png",
+                "signatures.png", "diagnosability.md", "diagnosability_paper.md", "diagnosability_paper.json",
+                "diagnosability_paper_laws.csv", "diagnosability_extended.md", "diagnosability_extended.json",
+                "diagnosability_extended_laws.csv")
+
+
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.errors import ParameterError
     from fuelhm_bench.datasets.knowledge import KnowledgeBuild, build_knowledge, write_knowledge
@@ -68,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
                           f"{len(intensities)} intensities) + --healthy-units {args.healthy_units} x "
                           f"--healthy-flights {args.healthy_flights} = {build.n_flights} flights of {minutes:g} min")
     t0 = time.perf_counter()
-    with atomic_directory(args.out, force=args.force) as tmp:  # nothing is published unless every file is written
+    # checked now (a user's file of the same name, before the simulation); nothing is published unless every file is written
+    with atomic_directory(args.out, force=args.force, expected=OUTPUT_FILES) as tmp:
         with progress_bar(build.n_flights, "ITL design of experiments") as bar:
             result = build_knowledge(build, progress=bar.update, workers=check_workers(args.jobs, "itl"))
         paths = write_knowledge(result, tmp)

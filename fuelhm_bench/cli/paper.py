@@ -32,14 +32,15 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.benchmark.paper import run_paper
-    from fuelhm_bench.benchmark.paper_report import model_figures, print_tables, write_outputs
+    from fuelhm_bench.benchmark.paper_report import OUTPUT_FILES, model_figures, print_tables, write_outputs
     from fuelhm_bench.datasets.parallel import check_workers, submit
     from fuelhm_bench.scenarios import load_scenario
 
     out = Path(args.out)
     sc = load_scenario(args.scenario)
     workers = check_workers(args.jobs, "--jobs")
-    with atomic_directory(out, force=args.force) as tmp:  # checked now; nothing is published unless every file is written
+    # checked now (a user's file of the same name, before the study); nothing is published unless every file is written
+    with atomic_directory(out, force=args.force, expected=OUTPUT_FILES) as tmp:
         # Figs. 4, 5 and 8 do not depend on the study: drawn on a core as soon as one is free.
         figures = submit(model_figures, sc.test_fleet_config().mission, tmp, workers=workers)
         with progress_bar(0, "paper study") as bar:

@@ -349,7 +349,8 @@ def write_text(path: str | os.PathLike[str], text: str, *, force: bool, what: st
 
 @contextlib.contextmanager
 def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names: Iterable[str] = (),
-                     option: str | None = "--out", inputs: Mapping | None = None) -> Iterator[Path]:
+                     expected: Iterable[str] = (), option: str | None = "--out",
+                     inputs: Mapping | None = None) -> Iterator[Path]:
     """Fill an output directory atomically: yield a temporary sibling, publish its content on success.
 
     The command writes every file into the yielded directory (a hidden
@@ -373,6 +374,11 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names
         and those fuelhm-bench did not write.
     names : iterable of str, default=()
         Files the command will write; without ``force`` any that exists is refused.
+    expected : iterable of str, default=()
+        Entries the command will write that a run of it again may refresh: checked
+        now, before the command's work, against the user's entries of the same
+        names (:func:`refuse_foreign`); unlike ``names``, an entry fuelhm-bench
+        wrote there earlier is replaced without ``force``.
     option : str or None, default="--out"
         Option named in messages.
     inputs : mapping of str to path-like or None, default=None
@@ -407,7 +413,7 @@ def atomic_directory(path: str | os.PathLike[str], *, force: bool = False, names
         refuse_inputs(target / name, inputs, option=option)
     if target.exists():
         check_output_dir(target, force=force, names=names, option=option)
-        refuse_foreign(target, names, force=force, option=option)
+        refuse_foreign(target, (*names, *expected), force=force, option=option)
     else:
         blocker = _blocking_file(target)
         if blocker is not None:
