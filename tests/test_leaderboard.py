@@ -152,3 +152,27 @@ def test_an_edited_copy_of_a_scenario_is_another_key(tmp_path):
 
     assert key("paper_2012") == key(copy)  # the same content, wherever it is read from
     assert key(edited) != key("paper_2012")
+
+
+def test_two_scenarios_with_one_id_are_refused(tmp_path):
+    """Two scenario files with the same name and version (a shipped one and an edited copy, or one listed
+    by name and by path) had separate store keys but shared their report folders and leaderboard rows."""
+    from fuelhm_bench.benchmark.leaderboard import LeaderboardEntry, plan_tasks
+    from fuelhm_bench.scenarios.registry import shipped_scenario_files
+
+    text = shipped_scenario_files()["paper_2012"].read_text()
+    edited = tmp_path / "edited" / "paper_2012.yaml"
+    edited.parent.mkdir()
+    edited.write_text(text.replace("noise_std_um: 3.0", "noise_std_um: 30.0"))
+    copy = tmp_path / "paper_2012.yaml"
+    copy.write_text(text)
+
+    def plan(*scenarios):
+        return plan_tasks(LeaderboardConfig((LeaderboardEntry("fuelhm_baselines.trivial:NullMethod"),), scenarios))
+
+    with pytest.raises(ScenarioError, match=r"'paper_2012' and '.*edited/paper_2012.yaml' are different scenarios "
+                                            r"with the same name and version \(paper_2012-v3\).*own name"):
+        plan("paper_2012", str(edited))
+    with pytest.raises(ScenarioError, match=r"are the same scenario .* List it once"):
+        plan("paper_2012", str(copy))
+    assert len(plan("paper_2012", "low_data")) == 2

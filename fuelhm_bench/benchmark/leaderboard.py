@@ -220,9 +220,17 @@ def plan_tasks(config: LeaderboardConfig, shared_params: dict | None = None) -> 
     shared = tuple(sorted((shared_params or {}).items()))
     hashes = {m.method: source_hash(m.method) for m in config.methods}
     tasks = []
+    ids: dict[str, str] = {}
     for scenario in config.scenarios:
         sc = load_scenario(scenario)
         digest = recipe_digest(sc)  # an edited copy of a shipped file keeps its name and version
+        if sc.id in ids:  # one id, one set of report folders and rows in the views
+            same = "the same scenario" if recipe_digest(load_scenario(ids[sc.id])) == digest else "different scenarios"
+            raise ScenarioError(f"Scenarios '{ids[sc.id]}' and '{scenario}' are {same} with the same name and version "
+                                f"({sc.id}): their results would share report folders and leaderboard rows. "
+                                + ("List it once." if same == "the same scenario" else
+                                   "Give the edited copy its own name (and file name) or a new version."))
+        ids[sc.id] = str(scenario)
         for seed in config.seeds:
             s = int(sc.seeds.master if seed is None else seed)
             fidelity = config.fidelity or sc.fidelity
