@@ -130,3 +130,32 @@ def test_round_trip_surrogate_fidelity(tmp_path):
     assert len(test) == 24 and np.isfinite(test["X1"]).all()
     path = _perfect_file(tmp_path / "out", tmp_path / "perfect.csv")
     assert score_decisions(path, scenario, **kw).summary_score == 100.0
+
+
+def test_physics_labels_carry_the_faults_outside_the_seven_modes(tmp_path):
+    """At physics fidelity the exported labels had no unknown_fault / onset_unknown: flights with a fault
+    outside the seven modes were scored as healthy (robustness_drift: the perfect decisions scored 87.05,
+    and 100 at surrogate fidelity). Both fidelities now label the same schedules the same way."""
+    import yaml
+
+    from conftest import _tiny_scenario
+
+    from fuelhm_bench.benchmark.exchange import EXPORT_LABEL_COLUMNS, scenario_tables
+    from fuelhm_bench.envs import KnowledgeSize
+
+    path = _tiny_scenario(tmp_path, "tinyunknown", base="robustness_drift")
+    data = yaml.safe_load(path.read_text())
+    data.update(degradations=[], healthy_probability=1.0,
+                unknown_faults=[{"effect": "lvdt_lag", "parameters": {"time_constant_s": 0.05}, "probability": 1.0,
+                                 "onset_min": 2, "onset_max": 4}])
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    export_scenario(path, tmp_path / "out", fidelity="physics", flight_minutes=2.0)
+    labels = pd.read_parquet(tmp_path / "out" / "labels.parquet")
+    assert list(labels.columns) == list(EXPORT_LABEL_COLUMNS)
+    assert (labels["unknown_fault"] == "lvdt_lag").all() and labels["onset_unknown"].between(2, 4).all()
+    pd.testing.assert_frame_equal(labels, scenario_tables(path, fidelity="surrogate", flight_minutes=2.0,
+                                                  knowledge_size=KnowledgeSize.small()).labels,
+                                  check_dtype=False)
+    card = score_decisions(_perfect_file(tmp_path / "out", tmp_path / "perfect.csv"), path, fidelity="physics",
+                           flight_minutes=2.0)
+    assert card.summary_score == 100.0

@@ -18,10 +18,14 @@ import pandas as pd
 
 from fuelhm_bench.errors import DataFormatError, ParameterError, show_value
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
-from fuelhm_bench.scoring.run import LABEL_COLUMNS
+from fuelhm_bench.scoring.run import LABEL_COLUMNS, UNKNOWN_ONSET_COLUMN
+
+#: Columns of the exported labels, at either fidelity: the seven modes' truth, then the fault outside them
+#: (``unknown_fault``, its effect id or ""; ``onset_unknown``, its onset flight or -1).
+EXPORT_LABEL_COLUMNS = (*LABEL_COLUMNS, "unknown_fault", UNKNOWN_ONSET_COLUMN)
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["DECISION_FILE_COLUMNS", "check_flights", "export_scenario", "read_decisions", "scenario_tables",
+__all__ = ["DECISION_FILE_COLUMNS", "EXPORT_LABEL_COLUMNS", "check_flights", "export_scenario", "read_decisions", "scenario_tables",
            "score_decisions"]
 
 #: Required columns of a decisions file (``guilt_<mode>`` are optional: zeros when absent).
@@ -44,7 +48,7 @@ class ScenarioTables:
     test : pandas.DataFrame
         Indicators of the scored fleet (``unit_id``, ``flight_index``, ...).
     labels : pandas.DataFrame
-        Ground truth of the scored flights (``LABEL_COLUMNS``).
+        Ground truth of the scored flights (:data:`EXPORT_LABEL_COLUMNS`).
     scenario : Scenario
         The scenario (seed and scale applied).
     """
@@ -121,8 +125,11 @@ def _schedule_labels(config, units) -> pd.DataFrame:
                 row[f"intensity_{m}"] = float(it.get(m, 0.0))
                 row[f"max_intensity_{m}"] = unit.schedule.max_intensity_of(m)
                 row[f"onset_{m}"] = unit.schedule.onset_of(m)
+            unknown = unit.schedule.unknown  # a fault outside the seven modes, as the environment labels it
+            row["unknown_fault"] = "" if unknown is None else unknown.effect
+            row[UNKNOWN_ONSET_COLUMN] = unit.schedule.unknown_onset
             rows.append(row)
-    return pd.DataFrame(rows, columns=list(LABEL_COLUMNS))
+    return pd.DataFrame(rows, columns=list(EXPORT_LABEL_COLUMNS))
 
 
 def _surrogate_tables(sc, n_units, flight_minutes, cache_dir,
@@ -148,8 +155,8 @@ def _surrogate_tables(sc, n_units, flight_minutes, cache_dir,
             lab[f"max_intensity_{m}"] = truth["max_intensity"][j]
             lab[f"onset_{m}"] = truth["onset"][j]
         lab["unknown_fault"] = truth.get("unknown_fault", "")  # a fault outside the seven modes ("" none)
-        lab["onset_unknown"] = truth.get("unknown_onset", -1)
-        lab_parts.append(pd.DataFrame(lab, columns=[*LABEL_COLUMNS, "unknown_fault", "onset_unknown"]))
+        lab[UNKNOWN_ONSET_COLUMN] = truth.get("unknown_onset", -1)
+        lab_parts.append(pd.DataFrame(lab, columns=list(EXPORT_LABEL_COLUMNS)))
     return pd.DataFrame(ind_rows), pd.concat(lab_parts, ignore_index=True)
 
 
