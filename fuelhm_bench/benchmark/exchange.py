@@ -116,19 +116,9 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
 
 def _schedule_labels(config, units) -> pd.DataFrame:
     """Labels of a fleet flown without maintenance, from its drawn schedules (no simulation)."""
-    rows = []
-    for unit in units:
-        for k in range(config.n_flights):
-            it = unit.schedule.intensities(k)
-            row = {"unit_id": unit.unit_id, "flight_index": k}
-            for m in MODE_IDS:
-                row[f"intensity_{m}"] = float(it.get(m, 0.0))
-                row[f"max_intensity_{m}"] = unit.schedule.max_intensity_of(m)
-                row[f"onset_{m}"] = unit.schedule.onset_of(m)
-            unknown = unit.schedule.unknown  # a fault outside the seven modes, as the environment labels it
-            row["unknown_fault"] = "" if unknown is None else unknown.effect
-            row[UNKNOWN_ONSET_COLUMN] = unit.schedule.unknown_onset
-            rows.append(row)
+    from fuelhm_bench.flights.fleet import label_row
+
+    rows = [label_row(unit, k, unit.schedule.intensities(k)) for unit in units for k in range(config.n_flights)]
     return pd.DataFrame(rows, columns=list(EXPORT_LABEL_COLUMNS))
 
 

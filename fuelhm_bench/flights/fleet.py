@@ -232,19 +232,26 @@ def flights_frame(flights: list[SimulatedFlight]) -> pd.DataFrame:
     return pd.concat(parts, ignore_index=True)
 
 
+def label_row(unit: Unit, flight_index: int, intensities: dict) -> dict:
+    """The ground truth of one flight of ``unit`` (the one home of a label row, whatever writes it).
+
+    Per mode ``intensity_<mode>`` (this flight's, from ``intensities``), ``max_intensity_<mode>`` and
+    ``onset_<mode>`` (the unit's schedule); then the unit's fault outside the seven modes:
+    ``unknown_fault`` (its effect id, "" if none) and ``onset_unknown`` (its onset flight, -1 if none).
+    """
+    row = {"unit_id": unit.unit_id, "flight_index": flight_index}
+    for m in MODE_IDS:
+        row[f"intensity_{m}"] = float(intensities.get(m, 0.0))
+        row[f"max_intensity_{m}"] = unit.schedule.max_intensity_of(m)
+        row[f"onset_{m}"] = unit.schedule.onset_of(m)
+    unknown = unit.schedule.unknown
+    row["unknown_fault"] = "" if unknown is None else unknown.effect
+    row["onset_unknown"] = unit.schedule.unknown_onset
+    return row
+
+
 def labels_frame(flights: list[SimulatedFlight], units: dict[int, Unit], hidden_effects: str = "") -> pd.DataFrame:
     """Ground-truth table keyed by flight_id (never mixed with the measurements)."""
-    rows = []
-    for fl in flights:
-        unit = units[fl.unit_id]
-        row = {"flight_id": fl.flight_id, "unit_id": fl.unit_id, "flight_index": fl.flight_index}
-        for m in MODE_IDS:
-            row[f"intensity_{m}"] = float(fl.intensities.get(m, 0.0))
-            row[f"max_intensity_{m}"] = unit.schedule.max_intensity_of(m)
-            row[f"onset_{m}"] = unit.schedule.onset_of(m)
-        unknown = unit.schedule.unknown
-        row["unknown_fault"] = "" if unknown is None else unknown.effect
-        row["onset_unknown"] = unit.schedule.unknown_onset
-        row["hidden_effects"] = hidden_effects
-        rows.append(row)
+    rows = [{"flight_id": fl.flight_id, **label_row(units[fl.unit_id], fl.flight_index, fl.intensities),
+             "hidden_effects": hidden_effects} for fl in flights]
     return pd.DataFrame(rows)
