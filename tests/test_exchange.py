@@ -89,6 +89,23 @@ def test_export_refuses_to_overwrite(exported):
                                                                   r"has \d+ unit\(s\)"),
     (lambda d: d.assign(flight_index=[99] + list(d["flight_index"][1:])), r"line 2: column 'flight_index' must be a "
                                                                           r"scored flight of unit \d+, 0 to \d+\. Got 99"),
+    # calibration rows were only counted (>= 2): a file could set every *_thr threshold itself
+    (lambda d: pd.concat([d[d["split"] == "test"], d[d["split"] == "calibration"].iloc[:2]]),
+     r"\d+ of the calibration flights of training.parquet: \d+ flights of units \d+ to \d+ have no 'calibration' "
+     r"row"),
+    (lambda d: d.assign(unit_id=np.where(d["split"] == "calibration", 12345, d["unit_id"])),
+     r"line \d+: a 'calibration' row names flight 0 of unit 12345, which is not one of the calibration flights"),
+    (lambda d: pd.concat([d, d[d["split"] == "calibration"].iloc[:1]]), r"line \d+: a 'calibration' row repeats"),
+    (lambda d: pd.concat([d, d[d["split"] == "test"].assign(split="calibration")]),  # the scored flights' scores
+     r"line \d+: a 'calibration' row names flight 0 of unit 0, which is not one"),
+    # guilt: the sum and the rule with the line (it said "an invalid guilt at flight 12 of unit 0")
+    (lambda d: d.assign(alarm=1, **{GUILT_COLUMNS[0]: 0.5, GUILT_COLUMNS[1]: 0.0}).pipe(
+        lambda e: e.assign(**{c: 0.0 for c in GUILT_COLUMNS[2:]})),
+     r"line 2: columns guilt_<mode> must sum to 1 on an alarm \(or all 0: uniform guilt\), within 0.001. Got a "
+     r"sum of 0.5"),
+    (lambda d: d.assign(alarm=0, **{GUILT_COLUMNS[0]: 0.3}).pipe(
+        lambda e: e.assign(**{c: 0.0 for c in GUILT_COLUMNS[1:]})),
+     r"line 2: columns guilt_<mode> must sum to 0 or 1 without an alarm, within 0.001. Got a sum of 0.3"),
 ])
 def test_bad_decisions_file_is_named(exported, tmp_path, edit, match):
     scenario, out = exported
@@ -159,3 +176,22 @@ def test_physics_labels_carry_the_faults_outside_the_seven_modes(tmp_path):
     card = score_decisions(_perfect_file(tmp_path / "out", tmp_path / "perfect.csv"), path, fidelity="physics",
                            flight_minutes=2.0)
     assert card.summary_score == 100.0
+
+
+def test_csv_lines_count_blank_lines_and_rounded_guilt_is_accepted(exported, tmp_path):
+    """pandas skips blank lines, so an error named the line above the bad one; and probabilities written
+    rounded (0.3333 x 3) were refused by the harness's 1e-6 tolerance."""
+    scenario, out = exported
+    good = pd.read_csv(_perfect_file(out, tmp_path / "good.csv"))
+    text = good.to_csv(index=False).splitlines()
+    text[5] = text[5].replace("test", "tset", 1)
+    bad = tmp_path / "blank.csv"
+    bad.write_text("\n".join(text[:3] + [""] + text[3:]) + "\n")  # a blank line 4; the bad row is on line 7
+    with pytest.raises(DataFormatError, match=r"blank.csv, line 7: column 'split' must be"):
+        score_decisions(bad, scenario, flight_minutes=2.0)
+    alarm = good["alarm"].astype(bool)
+    guilt = good[list(GUILT_COLUMNS)].to_numpy()
+    rounded = np.where(guilt == 1.0, 0.9995, guilt)  # within 1e-3 of 1: divided by its sum
+    good.loc[alarm, list(GUILT_COLUMNS)] = rounded[alarm.to_numpy()]
+    good.to_csv(tmp_path / "rounded.csv", index=False)
+    assert score_decisions(tmp_path / "rounded.csv", scenario, flight_minutes=2.0).summary_score == 100.0

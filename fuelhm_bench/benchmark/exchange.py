@@ -25,7 +25,7 @@ from fuelhm_bench.scoring.run import LABEL_COLUMNS, UNKNOWN_ONSET_COLUMN
 EXPORT_LABEL_COLUMNS = (*LABEL_COLUMNS, "unknown_fault", UNKNOWN_ONSET_COLUMN)
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["DECISION_FILE_COLUMNS", "EXPORT_LABEL_COLUMNS", "check_flights", "export_scenario", "read_decisions", "scenario_tables",
+__all__ = ["DECISION_FILE_COLUMNS", "EXPORT_LABEL_COLUMNS", "FILE_GUILT_SUM_TOLERANCE", "check_calibration", "check_flights", "export_scenario", "read_decisions", "scenario_tables",
            "score_decisions"]
 
 #: Required columns of a decisions file (``guilt_<mode>`` are optional: zeros when absent).
@@ -260,7 +260,8 @@ def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
     DataFormatError
         Naming the file, the column and the first bad row (1-based line of a CSV).
     """
-    test, healthy, _ = _read_decisions(path)
+    test, calibration, _ = _read_decisions(path)
+    healthy = calibration["score"].to_numpy(dtype=float)
     return test.reset_index(drop=True), healthy
 
 
@@ -272,9 +273,10 @@ def _read_decisions(path):
     if not path.exists():
         raise DataFormatError(f"{path}: no such decisions file.")
     frame = read_table(path, what="decisions file", csv_dtypes={"split": "str", "alarm": "str"},
-                       csv_na_values=[""])  # (a directory, a name not saying the format: refused, named)
+                       csv_na_values=[""], csv_lines=True)  # (a directory, a name not saying the format: refused)
     csv = table_format(path) != "parquet"
-    line = (lambda i: f"line {i + 2}") if csv else (lambda i: f"row {i}")
+    lines = frame.attrs.get("csv_line")  # (pandas skips blank lines: a row's line is not row + 2)
+    line = (lambda i: f"line {lines[i]}") if csv else (lambda i: f"row {i}")
     missing = [c for c in DECISION_FILE_COLUMNS if c not in frame.columns]
     if missing:
         raise DataFormatError(f"{path}: the decisions file must have the columns "
@@ -321,17 +323,42 @@ def _read_decisions(path):
                                   f"Got {show_value(frame[col].iloc[i])} instead.")
         frame[col] = values
     test = frame[split == "test"].copy()
-    healthy = frame.loc[split == "calibration", "score"].to_numpy(dtype=float)
-    if len(healthy) < 2:
+    calibration = frame.loc[split == "calibration", ["unit_id", "flight_index", "score"]]
+    if len(calibration) < 2:
         raise DataFormatError(f"{path}: the decisions file must hold the scores of at least 2 "
                               f"'calibration' flights (the held-out healthy training units of "
                               f"training.parquet); they set the thresholds mu + A sigma. Got "
-                              f"{len(healthy)} instead.")
+                              f"{len(calibration)} instead.")
+    test[list(GUILT_COLUMNS)] = _file_guilt(test, path, line)
+    return test[list(DECISION_COLUMNS)], calibration, line
+
+
+#: How far a file's guilt row may sum from 1 (probabilities written rounded, e.g. 0.3333 x 3); such a
+#: row is divided by its sum. Methods run by the harness keep the tighter ``GUILT_SUM_TOLERANCE``.
+FILE_GUILT_SUM_TOLERANCE = 1e-3
+
+
+def _file_guilt(test: pd.DataFrame, path, line) -> np.ndarray:
+    """The guilt of the ``test`` rows as the scorer takes it, or the first row that breaks the rule.
+
+    On an alarm the guilt sums to 1 (within :data:`FILE_GUILT_SUM_TOLERANCE`; none at all: uniform
+    guilt, the alarm without a diagnosis); without an alarm it is all 0 or sums to 1, as a method's
+    decision (:func:`~fuelhm_bench.methods.decision.decision_problem`).
+    """
     guilt = test[list(GUILT_COLUMNS)].to_numpy(dtype=float, copy=True)
-    no_guilt = test["alarm"].to_numpy() & (guilt.sum(axis=1) == 0)
-    guilt[no_guilt] = 1.0 / len(MODE_IDS)  # an alarm without a diagnosis: uniform guilt
-    test[list(GUILT_COLUMNS)] = guilt
-    return test[list(DECISION_COLUMNS)], healthy, line
+    alarm = test["alarm"].to_numpy()
+    total = guilt.sum(axis=1)
+    near_one = np.abs(total - 1.0) <= FILE_GUILT_SUM_TOLERANCE
+    bad = (total != 0.0) & ~near_one
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        rule = "1 on an alarm (or all 0: uniform guilt)" if alarm[i] else "0 or 1 without an alarm"
+        raise DataFormatError(f"{path}, {line(test.index[i])}: columns guilt_<mode> must sum to {rule}, within "
+                              f"{FILE_GUILT_SUM_TOLERANCE:g}. Got a sum of {total[i]:.6g} instead "
+                              f"({int(bad.sum())} row(s) like it).")
+    guilt[near_one] /= total[near_one, None]
+    guilt[alarm & (total == 0.0)] = 1.0 / len(MODE_IDS)  # an alarm without a diagnosis: uniform guilt
+    return guilt
 
 
 def check_flights(decisions: pd.DataFrame, labels: pd.DataFrame, path, line) -> None:
@@ -381,6 +408,54 @@ def check_flights(decisions: pd.DataFrame, labels: pd.DataFrame, path, line) -> 
                               f"({fleet}). {SAME_OPTIONS}")
 
 
+def check_calibration(calibration: pd.DataFrame, training: pd.DataFrame, path, line) -> None:
+    """Refuse ``calibration`` rows that are not exactly the calibration flights of the exported training table.
+
+    Their scores set the thresholds ``mu + A sigma``; a file free to choose them (two rows, made-up
+    units, the scored flights copied) would set the ``*_thr`` KPIs itself.
+
+    Parameters
+    ----------
+    calibration : pandas.DataFrame
+        The ``calibration`` rows (``unit_id``, ``flight_index``), indexed by their row in the file.
+    training : pandas.DataFrame
+        The scenario's training table with its ``split`` column (``training.parquet``).
+    path : path-like
+        The decisions file, named in messages.
+    line : callable
+        Row -> its place in the file.
+
+    Raises
+    ------
+    DataFormatError
+        Naming the file, and the line of the first unknown or repeated flight, or how many
+        calibration flights have no row.
+    """
+    keys = ["unit_id", "flight_index"]
+    expected = pd.MultiIndex.from_frame(training.loc[training["split"] == "calibration", keys].astype(np.int64))
+    given = pd.MultiIndex.from_frame(calibration[keys])
+    where = (f"the calibration flights of training.parquet: {len(expected)} flights of units "
+             f"{expected.get_level_values(0).min()} to {expected.get_level_values(0).max()}")
+    extra = ~given.isin(expected)
+    if extra.any():
+        i = calibration.index[np.flatnonzero(extra)[0]]
+        raise DataFormatError(f"{path}, {line(i)}: a 'calibration' row names flight {calibration.loc[i, 'flight_index']} "
+                              f"of unit {calibration.loc[i, 'unit_id']}, which is not one of {where} "
+                              f"({int(extra.sum())} row(s) like it). {SAME_OPTIONS}")
+    repeated = given.duplicated()
+    if repeated.any():
+        i = calibration.index[np.flatnonzero(repeated)[0]]
+        raise DataFormatError(f"{path}, {line(i)}: a 'calibration' row repeats flight "
+                              f"{calibration.loc[i, 'flight_index']} of unit {calibration.loc[i, 'unit_id']}; "
+                              f"one row per flight of {where}.")
+    missing = ~expected.isin(given)
+    if missing.any():
+        unit, k = expected[np.flatnonzero(missing)[0]]
+        raise DataFormatError(f"{path}: {int(missing.sum())} of {where} have no 'calibration' row, e.g. flight {k} "
+                              f"of unit {unit}; their scores set the thresholds, so every one is needed. "
+                              f"{SAME_OPTIONS}")
+
+
 def score_decisions(path, scenario, *, config=None, **kwargs):
     """Score a decisions file against a scenario's labels.
 
@@ -405,9 +480,12 @@ def score_decisions(path, scenario, *, config=None, **kwargs):
     """
     from fuelhm_bench.scoring import Run, score_run
 
-    decisions, healthy, line = _read_decisions(path)
-    labels = scenario_tables(scenario, **kwargs).labels
+    decisions, calibration, line = _read_decisions(path)
+    tables = scenario_tables(scenario, **kwargs)
+    labels = tables.labels
     check_flights(decisions, labels, path, line)
+    check_calibration(calibration, tables.training, path, line)
+    healthy = calibration["score"].to_numpy(dtype=float)
     decisions = decisions.reset_index(drop=True)
     try:
         run = Run(labels=labels, decisions=decisions, healthy_scores=healthy, name=Path(path).stem)

@@ -29,6 +29,7 @@ from pathlib import Path
 from collections.abc import Callable
 from typing import IO, Literal
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -96,6 +97,7 @@ def read_table(
     what: str = "table file",
     csv_dtypes: dict[str, str] | None = None,
     csv_na_values: list[str] | None = None,
+    csv_lines: bool = False,
 ) -> pd.DataFrame:
     """Read a Parquet / CSV / CSV.gz file into a DataFrame with a default index.
 
@@ -112,6 +114,10 @@ def read_table(
     csv_na_values : list of str, optional
         The only CSV cells read as missing (e.g. ``[""]``, so a cell ``nan``
         stays text and can be reported as given); default: pandas' list.
+    csv_lines : bool, default=False
+        For a CSV file, store each row's line in the file (1-based, the header
+        is line 1; blank lines, which pandas skips, counted) in
+        ``frame.attrs["csv_line"]``, for messages that name a row's line.
 
     Returns
     -------
@@ -144,6 +150,8 @@ def read_table(
             frame = _read_parquet(path)
         else:
             frame = _read_csv(path, compressed=fmt == "csv.gz", dtypes=csv_dtypes or {}, na_values=csv_na_values)
+            if csv_lines:
+                frame.attrs["csv_line"] = _csv_lines(path, fmt == "csv.gz", len(frame))
     except pd.errors.EmptyDataError as exc:
         raise DataFormatError(f"The {what} '{path}' is empty: it has no header line.") from exc
     except DataFormatError:
@@ -153,6 +161,18 @@ def read_table(
             f"Cannot read the {what} '{path}' as {fmt}: {type(exc).__name__}: {exc}"
         ) from exc
     return frame
+
+
+def _csv_lines(path: Path, compressed: bool, n_rows: int) -> np.ndarray:
+    """Line in the file (1-based) of each of the ``n_rows`` data rows pandas read (it skips blank lines).
+
+    Counts the non-blank lines after the header; when that does not give ``n_rows`` lines (a quoted
+    field spanning lines), falls back to ``row + 2``.
+    """
+    with (gzip.open(path, "rt", newline="") if compressed else open(path, newline="")) as f:
+        lines = [n for n, text in enumerate(f, start=1) if text.strip("\r\n")]
+    lines = lines[1:]  # the header
+    return np.asarray(lines if len(lines) == n_rows else np.arange(n_rows) + 2, dtype=np.int64)
 
 
 def _duplicate_columns(names) -> list[str]:
