@@ -195,3 +195,25 @@ def test_csv_lines_count_blank_lines_and_rounded_guilt_is_accepted(exported, tmp
     good.loc[alarm, list(GUILT_COLUMNS)] = rounded[alarm.to_numpy()]
     good.to_csv(tmp_path / "rounded.csv", index=False)
     assert score_decisions(tmp_path / "rounded.csv", scenario, flight_minutes=2.0).summary_score == 100.0
+
+
+def test_score_checks_the_export_it_was_given(exported, tmp_path, capsys):
+    """A wrong --seed with the same number of units has the same flight keys: 'score' scored the decisions
+    against another fleet with exit 0 (35.86 instead of 27.0). export.json now identifies the flights."""
+    import json
+
+    scenario, out = exported
+    manifest = json.loads((out / "export.json").read_text())
+    assert manifest["scenario"] == "tiny-v3" and manifest["flight_minutes"] == 2.0 and len(manifest["tables_digest"]) == 16
+    path = _perfect_file(out, tmp_path / "perfect.csv")
+    assert main(["score", str(path), "--scenario", str(scenario), "--minutes", "2", "--exported", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"tables {manifest['tables_digest']}" in printed and "seed " in printed
+    assert main(["score", str(path), "--scenario", str(scenario), "--minutes", "2", "--seed", "5",
+                 "--exported", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "export.json: these decisions were made on other flights than the ones scored: seed" in err
+    assert "there, 5 here" in err and "tables_digest" in err
+    assert main(["score", str(path), "--scenario", str(scenario), "--minutes", "2",
+                 "--exported", str(tmp_path)]) == 2
+    assert f"--exported {tmp_path}: no export.json there" in capsys.readouterr().err

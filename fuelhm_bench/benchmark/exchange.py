@@ -10,6 +10,8 @@ the one place that asks the simulation cache.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 from pathlib import Path
 from typing import Any, Callable
 
@@ -25,8 +27,9 @@ from fuelhm_bench.scoring.run import LABEL_COLUMNS, UNKNOWN_ONSET_COLUMN
 EXPORT_LABEL_COLUMNS = (*LABEL_COLUMNS, "unknown_fault", UNKNOWN_ONSET_COLUMN)
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["DECISION_FILE_COLUMNS", "EXPORT_LABEL_COLUMNS", "FILE_GUILT_SUM_TOLERANCE", "check_calibration", "check_flights", "export_scenario", "read_decisions", "scenario_tables",
-           "score_decisions"]
+__all__ = ["DECISION_FILE_COLUMNS", "EXPORT_LABEL_COLUMNS", "EXPORT_MANIFEST", "FILE_GUILT_SUM_TOLERANCE",
+           "ScenarioTables", "check_calibration", "check_fingerprint", "check_flights", "export_scenario",
+           "read_decisions", "scenario_tables", "score_decisions", "score_tables"]
 
 #: Required columns of a decisions file (``guilt_<mode>`` are optional: zeros when absent).
 DECISION_FILE_COLUMNS: tuple[str, ...] = ("split", "unit_id", "flight_index", "score", "alarm")
@@ -51,12 +54,63 @@ class ScenarioTables:
         Ground truth of the scored flights (:data:`EXPORT_LABEL_COLUMNS`).
     scenario : Scenario
         The scenario (seed and scale applied).
+    fidelity : str
+        Of the scored flights.
+    flight_minutes : float
+        Flight duration [min].
     """
 
     training: pd.DataFrame
     test: pd.DataFrame
     labels: pd.DataFrame
     scenario: Any
+    fidelity: str = "physics"
+    flight_minutes: float = float("nan")
+
+    def fingerprint(self) -> dict:
+        """What identifies these flights: the options that select them and a hash of their tables.
+
+        ``export`` writes it (:data:`EXPORT_MANIFEST`) and ``score --exported`` compares it, so decisions
+        made on one export are never scored against another fleet (a different ``--seed`` with the same
+        number of units has the same flight keys).
+        """
+        from fuelhm_bench.datasets.cache import recipe_digest
+
+        digest = hashlib.sha256()
+        for table in (self.training, self.test, self.labels):
+            digest.update(pd.util.hash_pandas_object(table, index=False).to_numpy().tobytes())
+        return {"scenario": self.scenario.id, "fidelity": self.fidelity, "seed": int(self.scenario.seeds.master),
+                "scored_units": int(self.scenario.fleet.units), "flight_minutes": float(self.flight_minutes),
+                "scenario_digest": recipe_digest(self.scenario)[:16], "tables_digest": digest.hexdigest()[:16]}
+
+
+#: File of ``export``'s output folder holding :meth:`ScenarioTables.fingerprint` (JSON).
+EXPORT_MANIFEST = "export.json"
+
+
+def check_fingerprint(tables: ScenarioTables, exported) -> None:
+    """Refuse to score against flights other than those of the export folder ``exported``.
+
+    Raises
+    ------
+    DataFormatError
+        Naming the manifest and every field that differs (the export's value and the score's).
+    """
+    manifest = Path(exported) / EXPORT_MANIFEST
+    try:
+        recorded = json.loads(manifest.read_text())
+    except FileNotFoundError:
+        raise DataFormatError(f"--exported {exported}: no {EXPORT_MANIFEST} there; give the folder written by "
+                              f"'fuelhm-bench export'.") from None
+    except (OSError, ValueError) as exc:
+        raise DataFormatError(f"{manifest}: cannot read it as JSON ({exc}).") from None
+    if not isinstance(recorded, dict):
+        raise DataFormatError(f"{manifest}: must hold a JSON object. Got {type(recorded).__name__} instead.")
+    now = tables.fingerprint()
+    differ = [f"{k} {recorded.get(k)!r} there, {v!r} here" for k, v in now.items() if recorded.get(k) != v]
+    if differ:
+        raise DataFormatError(f"{manifest}: these decisions were made on other flights than the ones scored: "
+                              f"{'; '.join(differ)}. {SAME_OPTIONS}")
 
 
 def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None = None,
@@ -111,7 +165,8 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
     else:
         test, labels = _surrogate_tables(sc, n_units, flight_minutes, cache_dir, knowledge_size)
     sc = dataclasses.replace(sc, fleet=dataclasses.replace(sc.fleet, units=n_units))
-    return ScenarioTables(training, test, labels, sc)
+    minutes = float(sc.mission.duration_min if flight_minutes is None else flight_minutes)
+    return ScenarioTables(training, test, labels, sc, fidelity, minutes)
 
 
 def _schedule_labels(config, units) -> pd.DataFrame:
@@ -188,12 +243,12 @@ def export_scenario(scenario, out_dir, *, raw: bool = False, force: bool = False
     """
     out = Path(out_dir)
     names = ["training", "test", "labels"] + (["raw_training", "raw_test"] if raw else [])
-    clash = [n for n in names if (out / f"{n}.parquet").exists()]
+    clash = [f"{n}.parquet" for n in names if (out / f"{n}.parquet").exists()]
+    clash += [EXPORT_MANIFEST] if (out / EXPORT_MANIFEST).exists() else []
     if clash and not force:
         from fuelhm_bench.errors import OutputPathError
 
-        raise OutputPathError(f"{out / (clash[0] + '.parquet')} exists; refusing to overwrite it "
-                              f"(pass --force).")
+        raise OutputPathError(f"{out / clash[0]} exists; refusing to overwrite it (pass --force).")
     if raw and kwargs.get("fidelity") == "surrogate":
         raise ParameterError("The '--raw' option of export needs the physics fidelity: the "
                              "surrogate draws indicators, not flights. Got --fidelity surrogate.")
@@ -202,6 +257,9 @@ def export_scenario(scenario, out_dir, *, raw: bool = False, force: bool = False
     paths = {"training": _write(tables.training, out / "training.parquet", True),
              "test": _write(tables.test, out / "test.parquet", True),
              "labels": _write(tables.labels, out / "labels.parquet", True)}
+    manifest = out / EXPORT_MANIFEST  # what 'score --exported' checks the scored flights against
+    manifest.write_text(json.dumps(tables.fingerprint(), indent=2) + "\n")
+    paths["manifest"] = manifest
     if raw:
         sc = tables.scenario
         minutes = kwargs.get("flight_minutes")
@@ -242,7 +300,7 @@ def _write_raw(config, path: Path, progress) -> Path:
 # --------------------------------------------------------------------------- decisions
 #: Said with every mismatch between a decisions file and the scenario's flights.
 SAME_OPTIONS = ("Score with the --scenario, --fidelity, --seed, --scale and --minutes given to 'fuelhm-bench "
-                "export'.")
+                "export' (--exported DIR checks them against its export.json).")
 
 
 def read_decisions(path) -> tuple[pd.DataFrame, np.ndarray]:
@@ -456,7 +514,7 @@ def check_calibration(calibration: pd.DataFrame, training: pd.DataFrame, path, l
                               f"{SAME_OPTIONS}")
 
 
-def score_decisions(path, scenario, *, config=None, **kwargs):
+def score_decisions(path, scenario, *, config=None, exported=None, **kwargs):
     """Score a decisions file against a scenario's labels.
 
     Parameters
@@ -465,6 +523,9 @@ def score_decisions(path, scenario, *, config=None, **kwargs):
         Decisions file (docs/scoring.md, "External methods").
     scenario : str, Path or Scenario
     config : ScoringConfig or None, default=None
+    exported : path-like or None, default=None
+        The folder ``export`` wrote the decisions' flights into: its :data:`EXPORT_MANIFEST` must
+        match the flights scored (:func:`check_fingerprint`).
     **kwargs
         ``fidelity, seed, scale, flight_minutes, cache_dir`` of :func:`scenario_tables`
         (the same as at export).
@@ -478,10 +539,17 @@ def score_decisions(path, scenario, *, config=None, **kwargs):
     DataFormatError
         Naming the file, for an invalid file or flights that do not match the scenario's.
     """
+    tables = scenario_tables(scenario, **kwargs)
+    if exported is not None:
+        check_fingerprint(tables, exported)
+    return score_tables(path, tables, config)
+
+
+def score_tables(path, tables: ScenarioTables, config=None):
+    """Score a decisions file against the flights of ``tables`` (:func:`score_decisions` once they are built)."""
     from fuelhm_bench.scoring import Run, score_run
 
     decisions, calibration, line = _read_decisions(path)
-    tables = scenario_tables(scenario, **kwargs)
     labels = tables.labels
     check_flights(decisions, labels, path, line)
     check_calibration(calibration, tables.training, path, line)

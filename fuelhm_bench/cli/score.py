@@ -15,6 +15,9 @@ def register(sub) -> None:
                                    "optionally guilt_<mode>; see docs/scoring.md, 'External methods'.")
     p.add_argument("decisions", help="decisions file (.parquet, .csv or .csv.gz)")
     add_scenario_options(p)
+    p.add_argument("--exported", default=None, metavar="DIR",
+                   help="the folder 'fuelhm-bench export' wrote: refuse to score unless the flights scored are "
+                        "the ones exported there (its export.json: scenario, fidelity, seed, scale, minutes, tables)")
     p.add_argument("--out", default=None, help="also write the KPI tables into this directory")
     p.add_argument("--force", action="store_true", help="overwrite existing table files")
     p.set_defaults(func=run)
@@ -40,11 +43,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, out_dir) -> int:
-    from fuelhm_bench.benchmark.exchange import score_decisions
+    from fuelhm_bench.benchmark.exchange import check_fingerprint, scenario_tables, score_tables
     from fuelhm_bench.scoring import headline_kpis, undefined_kpis
     from fuelhm_bench.scoring.bootstrap import scorecard_intervals
 
-    card = score_decisions(args.decisions, args.scenario, **scenario_kwargs(args))
+    tables = scenario_tables(args.scenario, **scenario_kwargs(args))
+    if args.exported is not None:
+        check_fingerprint(tables, args.exported)
+    card = score_tables(args.decisions, tables)
+    f = tables.fingerprint()  # compare with the export's export.json (or pass --exported)
+    print(f"flights scored: {f['scenario']}, {f['fidelity']}, seed {f['seed']}, {f['scored_units']} units, "
+          f"{f['flight_minutes']:g} min; tables {f['tables_digest']}")
     ci = scorecard_intervals(card).set_index("kpi")
     undefined = undefined_kpis(card)
     for kpi, value in headline_kpis(card).items():
