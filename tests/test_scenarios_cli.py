@@ -15,7 +15,7 @@ def test_validate_valid_file(capsys):
     path = BROKEN / "valid_base.yaml"
     assert main(["validate", str(path)]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("OK") and "broken-v1" in out
+    assert out.startswith("OK") and "valid_base-v1" in out
 
 
 def test_validate_shipped(capsys):
@@ -67,3 +67,13 @@ def test_schema_writes_file_and_refuses_overwrite(tmp_path, capsys):
     assert main(["schema", "--out", str(out)]) == 2
     assert "refusing to overwrite" in capsys.readouterr().err
     assert main(["schema", "--out", str(out), "--force"]) == 0
+
+
+def test_validate_refuses_a_copy_that_keeps_another_name(tmp_path, capsys):
+    """An edited copy saved as mine.yaml with name: paper_2012 was accepted as paper_2012-v3."""
+    path = tmp_path / "mine.yaml"
+    path.write_text((Path(__file__).parents[1] / "scenarios" / "paper_2012.yaml").read_text())
+    assert main(["validate", str(path)]) == 2
+    out = capsys.readouterr().out
+    assert f"{path}:5: name must be 'mine', the file's name without its suffix" in out
+    assert "Got 'paper_2012' instead" in out and "paper_2012-v3" not in out

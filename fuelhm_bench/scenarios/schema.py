@@ -731,7 +731,7 @@ class Scenario(Spec):
     schema_version : int
         Version of the scenario file format; only 1 exists.
     name : str
-        Scenario name, a lowercase identifier (a shipped scenario's file is <name>.yaml).
+        Scenario name, a lowercase identifier; a scenario file is <name>.yaml (the loader checks it).
     version : int
         Scenario version, >= 1: increment it for any change that alters simulated
         data or scores (the id is <name>-v<version>).
