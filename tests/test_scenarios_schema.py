@@ -95,6 +95,21 @@ def test_field_validation(cls, kwargs, field, allowed):
     assert str(info.value).startswith(f"{cls.__name__}.{field} must be")
 
 
+def test_every_cost_is_bounded():
+    """failure_kusd: 1e308 passed, then the run's cost_kusd overflowed to inf; one bound for every cost."""
+    from fuelhm_bench.scenarios.schema import MAX_COST_KUSD
+
+    costs = [f.name for f in dataclasses.fields(CostSpec) if f.name.endswith("_kusd")]
+    assert costs == ["false_alarm_kusd", "undetected_flight_kusd", "failure_kusd", "repair_kusd"]
+    for name in costs:
+        assert getattr(CostSpec(**{name: MAX_COST_KUSD}), name) == 1e6
+        for value in (1e308, 1.000001e6):
+            with pytest.raises(ScenarioValidationError) as info:
+                CostSpec(**{name: value})
+            (problem,) = info.value.problems
+            assert problem.field == name and problem.allowed == "a number in [0, 1000000]"
+
+
 def test_probabilities_rule_when_not_simultaneous():
     ok = (deg("backlash", 0.2), deg("spool_friction", 0.3))
     assert problems(degradations=ok, healthy_probability=0.5) == []

@@ -86,6 +86,10 @@ RUN_BUDGET_ENV: str = "FUELHM_RUN_BUDGET_FLIGHT_HOURS"
 #: (``tests/bench_physics.py``: 35.8-36.5 ms per flight-hour, see the README); used only to
 #: print an order of magnitude of a run's cost. It scales with the frame rate.
 SECONDS_PER_FLIGHT_HOUR_100HZ: float = 0.036
+#: Upper bound of every cost of a scenario's cost model [kUSD]: one billion US dollars, the order of the
+#: loss of an aircraft, far above any cost of one actuator event (the shipped failure cost is 500); a run's
+#: total then stays a finite number of kUSD (a cost of 1e308 overflowed to inf).
+MAX_COST_KUSD: int = 1_000_000
 #: Scenario names: lowercase identifiers (the ``-vN`` suffix is reserved for versions).
 NAME_PATTERN = r"[a-z][a-z0-9_]*"
 
@@ -681,21 +685,22 @@ class SeedSpec(Spec):
 class CostSpec(Spec):
     """Cost model behind rewards, in thousands of US dollars (kUSD).
 
-    The defaults are illustrative orders of magnitude, not airline data.
+    The defaults are illustrative orders of magnitude, not airline data. Every
+    cost is in [0, :data:`MAX_COST_KUSD`] (one billion US dollars).
     Intensity fractions refer to each mode's max_intensity in the scenario
     (the published maximal intensity), as in the scorer.
 
     Parameters
     ----------
     false_alarm_kusd : float, default=25.0
-        Cost of a removal of a unit that has no detectable fault (no fault found) [kUSD], >= 0.
+        Cost of a removal of a unit that has no detectable fault (no fault found) [kUSD], in [0, 1000000].
     undetected_flight_kusd : float, default=2.0
         Cost of each flight flown with a detectable fault that has not been
-        acted upon (risk exposure) [kUSD], >= 0.
+        acted upon (risk exposure) [kUSD], in [0, 1000000].
     failure_kusd : float, default=500.0
-        Cost of an in-flight failure, when a degradation reaches failure_fraction [kUSD], >= 0.
+        Cost of an in-flight failure, when a degradation reaches failure_fraction [kUSD], in [0, 1000000].
     repair_kusd : float, default=15.0
-        Cost of a correct maintenance action that repairs a faulty unit [kUSD], >= 0.
+        Cost of a correct maintenance action that repairs a faulty unit [kUSD], in [0, 1000000].
     detectable_fraction : float, default=0.25
         A fault is detectable from this fraction of its maximal intensity on,
         in (0, 1] (same default as the scorer's detectable_fraction).
@@ -704,10 +709,10 @@ class CostSpec(Spec):
         intensity, in (0, 1], > detectable_fraction.
     """
 
-    false_alarm_kusd: float = option(25.0, ge=0.0)
-    undetected_flight_kusd: float = option(2.0, ge=0.0)
-    failure_kusd: float = option(500.0, ge=0.0)
-    repair_kusd: float = option(15.0, ge=0.0)
+    false_alarm_kusd: float = option(25.0, ge=0.0, le=MAX_COST_KUSD)
+    undetected_flight_kusd: float = option(2.0, ge=0.0, le=MAX_COST_KUSD)
+    failure_kusd: float = option(500.0, ge=0.0, le=MAX_COST_KUSD)
+    repair_kusd: float = option(15.0, ge=0.0, le=MAX_COST_KUSD)
     detectable_fraction: float = option(ScoringConfig().detectable_fraction, gt=0.0, le=1.0)
     failure_fraction: float = option(1.0, gt=0.0, le=1.0)
 
