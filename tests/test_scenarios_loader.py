@@ -49,6 +49,8 @@ CASES = {
     "missing_key": (12, "seeds.master", "given (an integer in [0, 9223372036854775807])", "nothing (the key is missing)", None),
     "duplicate_key": (8, "fleet.units", "given once in its mapping", "'units'", None),
     "future_schema_version": (2, "schema_version", "one of 1", "2", "newer fuelhm-bench"),
+    "dispersion_too_large": (9, "fleet.dispersion_scale", "a number in [0, 3]", "5", None),
+    "cost_too_large": (13, "costs.failure_kusd", "a number in [0, 1000000]", "1e+308", None),
     "name_not_file_name": (3, "name", "'name_not_file_name', the file's name without its suffix", "'paper_2012'",
                            "Set name: name_not_file_name, or rename the file to paper_2012.yaml."),
 }

@@ -58,7 +58,8 @@ from fuelhm_bench.flights.schedule import GROWTH_LAWS, ModeSchedule, UnknownFaul
 from fuelhm_bench.physics.degradations import LAWS
 from fuelhm_bench.physics.effects import EFFECTS, make_effect
 from fuelhm_bench.physics.lvdt import LvdtParams
-from fuelhm_bench.physics.model import COMPONENTS, Dispersion, LoopModel
+from fuelhm_bench.physics.model import (COMPONENTS, DISPERSION_TRUNCATION, MAX_DISPERSION_SCALE, Dispersion, LoopModel,
+                                        dispersion_error, max_dispersion_scale)
 from fuelhm_bench.scenarios._fields import Problem, Spec, option, parameter_docs, show, suggest, unknown_key
 from fuelhm_bench.scoring.config import ScoringConfig
 from fuelhm_bench.taxonomy import EFFECT_IDS, MODE_IDS
@@ -310,13 +311,16 @@ class FleetSpec(Spec):
         Flights flown by each unit, in [1, 10000]; degradation onsets are indices into them.
     dispersion_scale : float, default=1.0
         Multiplies every standard deviation of the manufacturing dispersion
-        (:class:`~fuelhm_bench.physics.model.Dispersion`), in [0, 10]; 0 gives
-        identical units. Also used for the training fleet.
+        (:class:`~fuelhm_bench.physics.model.Dispersion`), in [0, 3]; 0 gives
+        identical units. Also used for the training fleet. The draws are truncated
+        at 3 standard deviations: at 3 the most dispersed parameters (10 %) move by
+        up to 90 %, and every unit so manufactured must be a valid model (a drift
+        that brings a parameter near its physical bound lowers the limit).
     """
 
     units: int = option(ge=1, le=MAX_UNITS)
     flights_per_unit: int = option(ge=1, le=MAX_FLIGHTS_PER_UNIT)
-    dispersion_scale: float = option(Dispersion().scale, ge=0.0, le=10.0)
+    dispersion_scale: float = option(Dispersion().scale, ge=0.0, le=MAX_DISPERSION_SCALE)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -1059,7 +1063,25 @@ class Scenario(Spec):
                 build()
             except FuelHMError as exc:
                 problems.append(_physics_problem(exc, label, getattr(self, label).to_dict()))
-        return problems
+        return problems or self._dispersion_checks()
+
+    def _dispersion_checks(self) -> list[Problem]:
+        """Every unit the dispersion can manufacture (draws at their truncation) is a valid model, in both fleets."""
+        dispersion = self.dispersion()
+        for model, fleet in ((self.truth_model(), "the training and scored fleets"),
+                             (self.drifted_model(), "the drifted scored fleet (lower the dispersion or the drift)")):
+            exc = dispersion_error(model, dispersion)
+            if exc is None:
+                continue
+            m = _PARAM_MSG.match(str(exc))
+            detail = (f"{m.group('name')} must be {m.group('allowed')} and would reach {m.group('given')}" if m
+                      else str(exc))
+            return [Problem("fleet.dispersion_scale",
+                            f"in [0, {max_dispersion_scale(model, dispersion):g}] here: every unit it can manufacture "
+                            f"must be a valid model", show(self.fleet.dispersion_scale),
+                            f"At {DISPERSION_TRUNCATION:g} standard deviations (where the draws are truncated), "
+                            f"{detail} in {fleet}.")]
+        return []
 
     def _mission_problem(self, exc: ParameterError) -> Problem:
         m = _PARAM_MSG.match(str(exc))
