@@ -271,7 +271,7 @@ def test_rewards_worked_example_in_the_docs(step_env):
 
     text = (Path(__file__).parents[1] / "docs" / "environment.md").read_text()
     for maintenance in (False, True):
-        found = re.search(rf"`maintenance={maintenance}`[^\n]*: never alarming `(\[[^`]*\])`, always alarming "
+        found = re.search(rf"`maintenance={maintenance}`[^*]*?never alarming\s+`(\[[^`]*\])`,\s+always alarming\s+"
                           rf"`(\[[^`]*\])`", text)
         assert found, f"docs/environment.md: no worked example with maintenance={maintenance}"
         for policy, shown in zip((NO_ALARM, ALARM), found.groups()):

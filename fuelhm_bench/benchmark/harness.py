@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -330,6 +331,7 @@ def _build_products(sc, fidelity, size, n_units: int, both: bool, common: dict, 
                 progress(n)
 
         common = {**common, "progress": locked}
+
     def training():
         table = training_indicators(sc, **common)
         check_training_indicators(table, label, fidelity=fidelity,
@@ -423,10 +425,8 @@ def _grouped_counts(counts: dict) -> str:
 
 
 def _main_reasons(table: pd.DataFrame, names: list, top: int = 2) -> str:
-    """`` Main reasons: '...' (400 flights); '...' (38).`` from ``quality_reason`` of the flights where one of
-    ``names`` is invalid (reasons differing only in their numbers count together)."""
-    import re
-
+    """`` Main reasons: '...' (400 flights); '...' (38 flights).`` from ``quality_reason`` of the flights where
+    one of ``names`` is invalid (reasons differing only in their numbers count together)."""
     if "quality_reason" not in table:
         return ""
     bad = ~table[[f"{name}_valid" for name in names]].astype(bool).all(axis=1)
