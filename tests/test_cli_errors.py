@@ -33,7 +33,8 @@ def run(capsys, *argv) -> tuple[int, str]:
     (["simulate", "--noise-um", "nan"], "argument --noise-um: must be a number in [0, 10000] um. Got nan instead."),
     (["simulate", "--adc-bits", "99"], "argument --adc-bits: must be an integer in [0, 24]. Got 99 instead."),
     (["simulate", "--frame-rate", "1e9"], "argument --frame-rate: must be a number in [1, 10000] Hz."),
-    (["simulate", "--dispersion", "-1"], "argument --dispersion: must be a number in [0, 10]. Got -1 instead."),
+    (["simulate", "--dispersion", "-1"], "argument --dispersion: must be a number in [0, 3]. Got -1 instead."),
+    (["simulate", "--dispersion", "5"], "argument --dispersion: must be a number in [0, 3]. Got 5 instead."),
     (["simulate", "--flights", "5", "--onset", "8-12", "--degrade", "internal_leakage:0.5"],
      "error: --onset must be MIN-MAX with MAX <= --flights - 1 = 4 (onsets are 0-based flight indices"),
     (["simulate", "--onset", "x-y", "--degrade", "internal_leakage:0.5"],
@@ -84,8 +85,22 @@ def test_option_message_maps_internal_fields_to_options():
         "--frame-rate must be in [1, 10000] Hz. Got 50000 instead."
     assert option_message(str(range_error("LvdtParams.noise_std_m", ">= 0", -1e-6)), args) == \
         "--noise-um must be >= 0 um. Got -1 instead."
-    other = str(range_error("Dispersion.scale", "in [0, 10]", -1.0))
+    other = str(range_error("Dispersion.scale", "in [0, 3]", -1.0))
     assert option_message(other, args) == other  # this command has no --dispersion: unchanged
+
+
+def test_dispersion_is_held_to_what_the_model_can_manufacture(tmp_path, capsys):
+    """--dispersion 5 passed the parser and failed in manufacture with "spool_friction_n must be >= 0"; a model
+    near a parameter's bound (discharge coefficient 0.98 <= 1) allows less."""
+    from fuelhm_bench.physics.model import MAX_DISPERSION_SCALE, LoopModel, save_model
+
+    assert MAX_DISPERSION_SCALE == 3.0  # the parser's bound (it loads no simulator)
+    model = save_model(LoopModel().with_parameters({"servovalve.discharge_coefficient": 0.98}), tmp_path / "m.yaml")
+    code, err = run(capsys, "simulate", "--model", str(model), "--units", "1", "--flights", "1", "--minutes", "2",
+                    "--out", str(tmp_path / "o.parquet"))
+    assert code == 2 and "error: --dispersion must be in [0, 0.339] for this model" in err
+    assert "discharge_coefficient' parameter must be in (0, 1]. Got 1.0388 instead" in err and "Got 1 instead." in err
+    assert not (tmp_path / "o.parquet").exists()
 
 
 def test_out_below_a_file(tmp_path, capsys):

@@ -263,6 +263,22 @@ def test_rewards_without_maintenance(step_env):
     assert truth["cost_kusd"].sum() == 155.0
 
 
+def test_rewards_worked_example_in_the_docs(step_env):
+    """docs/environment.md's example gave the rewards of maintenance=False without saying so (the default is True)."""
+    import ast
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "docs" / "environment.md").read_text()
+    for maintenance in (False, True):
+        found = re.search(rf"`maintenance={maintenance}`[^*]*?never alarming\s+`(\[[^`]*\])`,\s+always alarming\s+"
+                          rf"`(\[[^`]*\])`", text)
+        assert found, f"docs/environment.md: no worked example with maintenance={maintenance}"
+        for policy, shown in zip((NO_ALARM, ALARM), found.groups()):
+            _, rewards, _ = episode(step_env(maintenance), policy, options={"unit": 0})
+            assert rewards == ast.literal_eval(shown), (maintenance, rewards)
+
+
 def test_rewards_with_maintenance(step_env):
     env = step_env(True)
     _, rewards, info = episode(env, lambda t: ALARM if t in (2, 4) else NO_ALARM, options={"unit": 0})

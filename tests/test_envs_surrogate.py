@@ -169,6 +169,8 @@ def test_draws_are_deterministic_and_extrapolate_the_last_segment(model):
     (lambda h, d: (h[[c for c in h.columns if not c.endswith("_valid")]], d), r"no indicator column"),
     (lambda h, d: (h.drop_duplicates("unit_id"), d), r"at least one unit with two flights"),
     (lambda h, d: ("table.csv", d), r"must be a pandas DataFrame"),
+    # an indicator never valid (a scenario whose flights never excite it) is named, not numbered ([4])
+    (lambda h, d: (h.assign(EXT=np.nan, EXT_valid=False), d), r"no valid value of the indicator\(s\) EXT: "),
 ])
 def test_bad_tables_raise_clear_errors(mutate, message):
     h, d = mutate(healthy_table(n_units=4, n_flights=3), doe_table(n_units=2))

@@ -255,3 +255,55 @@ def test_a_duration_override_is_held_to_the_run_budget(monkeypatch):
     from fuelhm_bench.scenarios import load_scenario
 
     _check_minutes(1440, "x", load_scenario("paper_2012"))
+
+
+# --------------------------------------------------------------------------- scenarios that excite too little
+def _indicator_table(n: int, valid: dict, reason: str = "") -> pd.DataFrame:
+    """``n`` flights, every indicator valid except ``valid[name]`` flights of ``name``."""
+    data = {"unit_id": np.arange(n) // 2}
+    for name in (*INDICATOR_NAMES, *EXTENDED_INDICATOR_NAMES):
+        data[f"{name}_valid"] = np.arange(n) < valid.get(name, n)
+    data["quality_reason"] = ["" if all(data[f"{k}_valid"][i] for k in valid) else reason for i in range(n)]
+    return pd.DataFrame(data)
+
+
+def test_check_training_indicators_rule():
+    """Each of the paper's ten valid in >= 11 / knowledge_flights of the training flights; at the surrogate
+    fidelity every extended indicator valid somewhere."""
+    from fuelhm_bench.benchmark.harness import check_training_indicators
+    from fuelhm_bench.errors import ScenarioError
+
+    def check(table, fidelity="physics", knowledge_flights=40):
+        check_training_indicators(table, "x.yaml (x-v1)", fidelity=fidelity, knowledge_flights=knowledge_flights)
+
+    check(_indicator_table(400, {"X1": 110}))  # 27.5 %: the published knowledge's 40 flights expect 11
+    check(_indicator_table(400, {"V_in7": 0}))  # physics: the extended indicators are not needed
+    with pytest.raises(ScenarioError) as info:
+        check(_indicator_table(400, {"X1": 109, "Y1": 109, "Inb": 3}, reason="X1: slope change at 2.5 mA"))
+    message = str(info.value)
+    assert message.startswith("x.yaml (x-v1): too few valid indicators in its 400 healthy training flights. "
+                              "Valid in 3 flights: Inb; in 109: X1, Y1 (each of the paper's ten must be valid in at "
+                              "least 27.5 % of them")
+    assert "Main reasons: 'X1: slope change at 2.5 mA' (397 flights)." in message
+    assert "mission.test_sweep" in message and "sensor.adc_bits" in message
+    with pytest.raises(ScenarioError, match=r"too few .* Valid in 10 flights: X1 .* 11 of its 16 healthy flights"):
+        check(_indicator_table(16, {"X1": 10}), knowledge_flights=16)
+    with pytest.raises(ScenarioError, match=r"At the surrogate fidelity, V_in7, V_out7 must be valid in some flights"):
+        check(_indicator_table(400, {"V_in7": 0, "V_out7": 0}), fidelity="surrogate")
+
+
+@pytest.mark.parametrize("fidelity", ["physics", "surrogate"])
+def test_a_scenario_without_test_sweep_is_refused_with_its_file_and_fields(tmp_path, cache_dir, fidelity):
+    """test_sweep: false passed validate, then every evaluate failed in the knowledge build with "HealthyModel
+    needs at least 11 healthy flights ... use the 'features' parameter" (a Python parameter, no file, no field)."""
+    from conftest import _tiny_scenario
+    from fuelhm_bench.errors import ScenarioError
+
+    path = _tiny_scenario(tmp_path, "no_sweep")
+    path.write_text(path.read_text().replace("test_sweep: true", "test_sweep: false"))
+    with pytest.raises(ScenarioError) as info:
+        prepare_evaluation(path, fidelity=fidelity, knowledge_size=SMALL, cache_dir=cache_dir)
+    message = str(info.value)
+    assert message.startswith(f"{path} (no_sweep-v3): too few valid indicators in its 24 healthy training flights")
+    assert "Valid in 0 flights: X1, Y1" in message and "Main reasons: '" in message
+    assert "mission.test_sweep" in message and "HealthyModel" not in message

@@ -15,7 +15,7 @@ def test_validate_valid_file(capsys):
     path = BROKEN / "valid_base.yaml"
     assert main(["validate", str(path)]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("OK") and "broken-v1" in out
+    assert out.startswith("OK") and "valid_base-v1" in out
 
 
 def test_validate_shipped(capsys):
@@ -67,3 +67,30 @@ def test_schema_writes_file_and_refuses_overwrite(tmp_path, capsys):
     assert main(["schema", "--out", str(out)]) == 2
     assert "refusing to overwrite" in capsys.readouterr().err
     assert main(["schema", "--out", str(out), "--force"]) == 0
+
+
+def test_validate_refuses_a_copy_that_keeps_another_name(tmp_path, capsys):
+    """An edited copy saved as mine.yaml with name: paper_2012 was accepted as paper_2012-v3."""
+    path = tmp_path / "mine.yaml"
+    path.write_text((Path(__file__).parents[1] / "scenarios" / "paper_2012.yaml").read_text())
+    assert main(["validate", str(path)]) == 2
+    out = capsys.readouterr().out
+    assert f"{path}:5: name must be 'mine', the file's name without its suffix" in out
+    assert "Got 'paper_2012' instead" in out and "paper_2012-v3" not in out
+
+
+def test_evaluate_and_leaderboard_refuse_a_copy_that_keeps_another_name(tmp_path, capsys):
+    """The copy was evaluated and ranked as paper_2012-v3, beside (and indistinguishable from) the shipped one."""
+    import pytest
+
+    from fuelhm_bench.benchmark.leaderboard import LeaderboardConfig, LeaderboardEntry, plan_tasks
+    from fuelhm_bench.errors import ScenarioError
+
+    path = tmp_path / "mine.yaml"
+    path.write_text((Path(__file__).parents[1] / "scenarios" / "paper_2012.yaml").read_text())
+    assert main(["evaluate", "--scenario", str(path), "--method", "fuelhm_baselines.trivial:NullMethod",
+                 "--fidelity", "surrogate", "--out", str(tmp_path / "out")]) == 2
+    assert f"{path}:5: name must be 'mine'" in capsys.readouterr().err
+    assert not any((tmp_path / "out").rglob("*"))  # nothing written
+    with pytest.raises(ScenarioError, match="name must be 'mine'"):
+        plan_tasks(LeaderboardConfig((LeaderboardEntry("fuelhm_baselines.trivial:NullMethod"),), (str(path),)))

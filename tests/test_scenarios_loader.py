@@ -49,6 +49,10 @@ CASES = {
     "missing_key": (12, "seeds.master", "given (an integer in [0, 9223372036854775807])", "nothing (the key is missing)", None),
     "duplicate_key": (8, "fleet.units", "given once in its mapping", "'units'", None),
     "future_schema_version": (2, "schema_version", "one of 1", "2", "newer fuelhm-bench"),
+    "dispersion_too_large": (9, "fleet.dispersion_scale", "a number in [0, 3]", "5", None),
+    "cost_too_large": (13, "costs.failure_kusd", "a number in [0, 1000000]", "1e+308", None),
+    "name_not_file_name": (3, "name", "'name_not_file_name', the file's name without its suffix", "'paper_2012'",
+                           "Set name: name_not_file_name, or rename the file to paper_2012.yaml."),
 }
 
 
@@ -64,7 +68,7 @@ def _single_problem(path: Path) -> tuple[Problem, str]:
 def test_valid_base_loads():
     """The broken files differ from this valid file by one defect each."""
     scenario = load_scenario_file(VALID_BASE)
-    assert scenario.id == "broken-v1"
+    assert scenario.id == "valid_base-v1"
     assert [d.mode for d in scenario.degradations] == ["null_bias_drift", "internal_leakage"]
 
 
@@ -209,7 +213,7 @@ def test_null_lists_and_sections_take_defaults():
 
 
 def test_safe_loader_refuses_python_objects():
-    text = _base_text().replace("name: broken", "name: !!python/object/apply:os.system ['true']")
+    text = _base_text().replace("name: valid_base", "name: !!python/object/apply:os.system ['true']")
     with pytest.raises(ScenarioValidationError) as info:
         parse_scenario(text, source="x.yaml")
     assert info.value.problems[0].line == 3
@@ -226,10 +230,31 @@ def test_unreadable_file(tmp_path):
 
 def test_round_trip_through_yaml(tmp_path):
     scenario = load_scenario("model_discrepancy")
-    path = tmp_path / "copy.yaml"
+    path = tmp_path / "model_discrepancy.yaml"
     path.write_text(yaml.safe_dump(scenario.to_dict(), sort_keys=False))
     assert load_scenario(path) == scenario
     assert load_scenario(str(path)) == scenario
+
+
+def test_a_file_must_declare_its_own_name(tmp_path):
+    """An edited copy saved under another name must not keep the original's id; every file is checked."""
+    text = (Path(__file__).parents[1] / "scenarios" / "paper_2012.yaml").read_text()
+    for stem, suffix in (("mine", ".yaml"), ("mine", ".yml"), ("My-Copy", ".yaml")):
+        path = tmp_path / f"{stem}{suffix}"
+        path.write_text(text)
+        with pytest.raises(ScenarioValidationError) as info:
+            load_scenario(path)
+        (problem,) = info.value.problems
+        assert (problem.field, problem.line, problem.given) == ("name", 5, "'paper_2012'")
+        assert f"'{stem}'" in problem.allowed and "rename the file to paper_2012.yaml" in problem.hint.lower()
+        assert str(info.value).startswith(f"{path}:5: name must be '{stem}', the file's name")
+    merged = tmp_path / "merged.yaml"  # the name comes from a merge key: still checked
+    merged.write_text("base: &b\n  name: paper_2012\n" + text.replace("name: paper_2012", "<<: *b"))
+    with pytest.raises(ScenarioValidationError, match="name must be 'merged', the file's name"):
+        load_scenario(merged)
+    (tmp_path / "mine.yaml").write_text(text.replace("name: paper_2012 ", "name: mine "))
+    assert load_scenario(tmp_path / "mine.yaml").id == "mine-v3"
+    assert parse_scenario(text, "mine.yaml").name == "paper_2012"  # text without a file: no file name to match
 
 
 def test_physics_error_in_mission_is_located(monkeypatch):

@@ -69,7 +69,8 @@ def test_shipped_name_must_match_the_file(tmp_path, monkeypatch):
     text = registry.shipped_scenario_files()["low_data"].read_text()
     (tmp_path / "other.yaml").write_text(text)
     monkeypatch.setattr(registry, "_shipped_directory", lambda: tmp_path)
-    with pytest.raises(ScenarioError, match="declares name 'low_data'; the name must match the file name"):
+    with pytest.raises(ScenarioError, match="other.yaml:4: name must be 'other', the file's name .* "
+                                            "Got 'low_data' instead"):
         load_scenario("other")
 
 

@@ -68,7 +68,9 @@ def test_fields_are_keyword_only_and_normalised():
     (TrainingSpec, {"units": 1, "flights_per_unit": 3}, "units", "an integer in [2, 10000]"),  # fit != calibration
     (FleetSpec, {"units": 2, "flights_per_unit": 3.0}, "flights_per_unit", "an integer in [1, 10000]"),
     (FleetSpec, {"units": 2, "flights_per_unit": 3, "dispersion_scale": float("nan")}, "dispersion_scale",
-     "a number in [0, 10]"),
+     "a number in [0, 3]"),
+    (FleetSpec, {"units": 2, "flights_per_unit": 3, "dispersion_scale": 5}, "dispersion_scale",
+     "a number in [0, 3]"),  # passed, then manufacture failed: "spool_friction_n must be >= 0" (seed-dependent)
     (SensorSpec, {"noise_std_um": -1.0}, "noise_std_um", "a number >= 0"),
     (MissionSpec, {"test_sweep": "yes"}, "test_sweep", "true or false"),
     (MissionSpec, {"duration_min": 1.5}, "duration_min", ">= (start_duration_s + 60 s) / 60 = 2 min"),
@@ -93,6 +95,34 @@ def test_field_validation(cls, kwargs, field, allowed):
     (problem,) = info.value.problems
     assert problem.field == field and allowed in problem.allowed
     assert str(info.value).startswith(f"{cls.__name__}.{field} must be")
+
+
+def test_every_unit_the_dispersion_can_manufacture_is_valid():
+    """The dispersion's worst case (draws at their 3-sd truncation) is checked against the fleets' models: a drift
+    to a discharge coefficient of 0.98 (<= 1) passed validate, then manufacture failed at a random unit."""
+    assert problems(fleet=dataclasses.replace(BASE.fleet, dispersion_scale=3.0)) == []  # the most the nominal allows
+    drift = (DriftSpec(parameter="servovalve.discharge_coefficient", change="relative", value=0.4),)
+    ((field, message),) = problems(drift=drift)
+    assert field == "fleet.dispersion_scale"
+    assert message.startswith("Scenario.fleet.dispersion_scale must be in [0, 0.339] here: every unit it can "
+                              "manufacture must be a valid model. Got 1.0 instead.")
+    assert "discharge_coefficient must be in (0, 1] and would reach 1.0388 in the drifted scored fleet" in message
+    assert problems(drift=drift, fleet=dataclasses.replace(BASE.fleet, dispersion_scale=0.339)) == []
+
+
+def test_every_cost_is_bounded():
+    """failure_kusd: 1e308 passed, then the run's cost_kusd overflowed to inf; one bound for every cost."""
+    from fuelhm_bench.scenarios.schema import MAX_COST_KUSD
+
+    costs = [f.name for f in dataclasses.fields(CostSpec) if f.name.endswith("_kusd")]
+    assert costs == ["false_alarm_kusd", "undetected_flight_kusd", "failure_kusd", "repair_kusd"]
+    for name in costs:
+        assert getattr(CostSpec(**{name: MAX_COST_KUSD}), name) == 1e6
+        for value in (1e308, 1.000001e6):
+            with pytest.raises(ScenarioValidationError) as info:
+                CostSpec(**{name: value})
+            (problem,) = info.value.problems
+            assert problem.field == name and problem.allowed == "a number in [0, 1000000]"
 
 
 def test_probabilities_rule_when_not_simultaneous():

@@ -47,6 +47,8 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import os
+import re
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -54,11 +56,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from fuelhm_bench.errors import DataFormatError, FuelHMError, ParameterError
+from fuelhm_bench.errors import DataFormatError, FuelHMError, ParameterError, ScenarioError
 from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS, OBSERVATION_COLUMNS
 
-__all__ = ["EnvEvaluation", "Outcome", "action_from_decision", "evaluate", "observation_row",
-           "prepare_evaluation", "run_in_env", "split_training"]
+__all__ = ["EnvEvaluation", "Outcome", "action_from_decision", "check_training_indicators", "evaluate",
+           "observation_row", "prepare_evaluation", "run_in_env", "split_training"]
 
 _ROW_INDEX = pd.Index(OBSERVATION_COLUMNS)
 
@@ -282,7 +284,9 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress, "workers": workers}
     from fuelhm_bench.flights.scale import scaled_unit_count  # every mode of the fleet stays represented
     n_units = scaled_unit_count(sc.test_fleet_config(), scale)
-    knowledge, training = _build_products(sc, fidelity, size, n_units, robustness and bool(sc.drift), common)
+    label = f"{scenario} ({sc.id})" if isinstance(scenario, (str, os.PathLike)) else f"scenario {sc.id}"
+    knowledge, training = _build_products(sc, fidelity, size, n_units, robustness and bool(sc.drift), common,
+                                          label=label, flight_minutes=flight_minutes)
     fit_part, cal_part = split_training(training)
     scored = sc if n_units == sc.fleet.units else dataclasses.replace(
         sc, fleet=dataclasses.replace(sc.fleet, units=n_units))  # products above are keyed on the unscaled one
@@ -303,10 +307,15 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     return make(True, nominal)
 
 
-def _build_products(sc, fidelity, size, n_units: int, both: bool, common: dict):
+def _build_products(sc, fidelity, size, n_units: int, both: bool, common: dict, *, label: str,
+                    flight_minutes: float | None):
     """The scenario's published knowledge and training table; every product :func:`prepare_evaluation` needs is
     built (or loaded) here, at once on ``common["workers"]`` processes
-    (:func:`~fuelhm_bench.datasets.parallel.run_concurrently`), so that its later asks are memory hits."""
+    (:func:`~fuelhm_bench.datasets.parallel.run_concurrently`), so that its later asks are memory hits.
+
+    The training table comes first and is checked (:func:`check_training_indicators`): a scenario whose
+    flights yield too few valid indicators is refused before the knowledge is simulated (with one
+    worker) or before the knowledge's own failure is reported (its error comes first)."""
     import threading
 
     from fuelhm_bench.datasets.cache import (published_knowledge, scored_indicators, surrogate_doe, surrogate_healthy,
@@ -322,14 +331,115 @@ def _build_products(sc, fidelity, size, n_units: int, both: bool, common: dict):
                 progress(n)
 
         common = {**common, "progress": locked}
-    calls = [lambda: published_knowledge(sc, size=size, **common), lambda: training_indicators(sc, **common)]
+
+    def training():
+        table = training_indicators(sc, **common)
+        check_training_indicators(table, label, fidelity=fidelity,
+                                  knowledge_flights=size.healthy_units * size.healthy_flights,
+                                  flight_minutes=flight_minutes)
+        return table
+
+    calls = [training, lambda: published_knowledge(sc, size=size, **common)]
     for drifted in ((True, False) if both else (True,)):
         if fidelity == "physics":
             calls.append(lambda d=drifted: scored_indicators(sc, units=n_units, drifted=d, **common))
         elif fidelity == "surrogate":
             calls.append(lambda d=drifted: surrogate_healthy(sc, size=size, drifted=d, **common))
             calls.append(lambda d=drifted: surrogate_doe(sc, size=size, drifted=d, **common))
-    return tuple(run_concurrently(calls, workers=common["workers"])[:2])
+    training_table, knowledge = run_concurrently(calls, workers=common["workers"])[:2]
+    return knowledge, training_table
+
+
+#: The indicator settings of a scenario: what a message about too few valid indicators points at.
+EXCITATION_FIELDS: tuple[str, ...] = ("mission.test_sweep", "mission.sweep_low_mm", "mission.sweep_high_mm",
+                                      "mission.sweep_rates_mm_s", "mission.frame_rate_hz", "sensor.noise_std_um",
+                                      "sensor.adc_bits", "operating.throttle_step_interval_s")
+
+
+def check_training_indicators(table: pd.DataFrame, label: str, *, fidelity: str, knowledge_flights: int,
+                              flight_minutes: float | None = None) -> None:
+    """Refuse a scenario whose healthy training flights yield too few valid indicators.
+
+    The paper's healthy model of ten indicators needs ``len(INDICATOR_NAMES) + 1`` = 11 flights with
+    every indicator valid (:class:`~fuelhm_bench.diagnosis.HealthyModel`), and the benchmark fits it
+    on the published knowledge's healthy flights (``knowledge_flights``, 40 by default) for every
+    evaluation. So each of the ten, and the ten together, must be valid in at least ``11 /
+    knowledge_flights`` of the training flights (27.5 % by default): below it, the expected number of
+    valid knowledge flights is under 11. At the surrogate fidelity every indicator, the extended ones
+    too, must also be valid in some training flight (the surrogate learns each from healthy flights).
+    Every shipped scenario has all ten valid in 100 % of its training flights, at its own flight
+    length and at 2-minute flights.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The training fleet's indicator table (with ``quality_reason``).
+    label : str
+        The scenario as named in the message (its file and id).
+    fidelity : str
+        The fidelity of the run.
+    knowledge_flights : int
+        Healthy flights of the published knowledge.
+    flight_minutes : float or None, default=None
+        The run's flight duration override, named in the message.
+
+    Raises
+    ------
+    ScenarioError
+        Naming the scenario, the indicators short of valid flights and how many they have, the most
+        frequent reasons and the scenario fields that set the excitation.
+    """
+    needed = len(INDICATOR_NAMES) + 1
+    pool = max(int(knowledge_flights), needed)
+    fraction = needed / pool
+    n = len(table)
+    valid = {name: int(table[f"{name}_valid"].astype(bool).sum()) for name in INDICATOR_NAMES}
+    complete = int(table[[f"{name}_valid" for name in INDICATOR_NAMES]].astype(bool).all(axis=1).sum())
+    short = {name: k for name, k in valid.items() if k * pool < needed * n}  # k / n < needed / pool, exactly
+    if not short and complete * pool < needed * n:
+        short = {"the ten together": complete}
+    never = [name for name in EXTENDED_INDICATOR_NAMES
+             if fidelity == "surrogate" and f"{name}_valid" in table and not table[f"{name}_valid"].any()]
+    if n == 0 or not (short or never):
+        return
+    minutes = f" of {flight_minutes:g} min" if flight_minutes is not None else ""
+    text = f"{label}: too few valid indicators in its {n} healthy training flights{minutes}."
+    if short:
+        text += (f" Valid in {_grouped_counts(short)} (each of the paper's ten must be valid in at least "
+                 f"{100 * fraction:.3g} % of them: the published knowledge's healthy model needs {needed} of its "
+                 f"{knowledge_flights} healthy flights).")
+        text += _main_reasons(table, [name for name in short if name in valid] or list(INDICATOR_NAMES))
+    if never:
+        text += (f" At the surrogate fidelity, {', '.join(never)} must be valid in some flights (the surrogate learns "
+                 f"every indicator from healthy flights; the physics fidelity does not need them).")
+    raise ScenarioError(f"{text} The excitation and reading of the actuator are set by {', '.join(EXCITATION_FIELDS)}.")
+
+
+def _grouped_counts(counts: dict) -> str:
+    """``"0 flights: X1, Y1; in 3: Inb"`` (flights in which each indicator is valid, fewest first)."""
+    groups: dict[int, list[str]] = {}
+    for name, k in counts.items():
+        groups.setdefault(k, []).append(name)
+    return "; in ".join(f"{k}{' flights' if i == 0 else ''}: {', '.join(names)}"
+                        for i, (k, names) in enumerate(sorted(groups.items())))
+
+
+def _main_reasons(table: pd.DataFrame, names: list, top: int = 2) -> str:
+    """`` Main reasons: '...' (400 flights); '...' (38 flights).`` from ``quality_reason`` of the flights where
+    one of ``names`` is invalid (reasons differing only in their numbers count together)."""
+    if "quality_reason" not in table:
+        return ""
+    bad = ~table[[f"{name}_valid" for name in names]].astype(bool).all(axis=1)
+    counts: dict[str, list] = {}
+    for text in table.loc[bad, "quality_reason"].astype(str):
+        for reason in filter(None, text.split("; ")):
+            entry = counts.setdefault(re.sub(r"[-+]?\d+(\.\d+)?", "#", reason), [reason, 0])
+            entry[1] += 1
+    best = sorted(counts.values(), key=lambda e: -e[1])[:top]
+    if not best:
+        return ""
+    shown = "; ".join(f"'{r if len(r) <= 160 else r[:157] + '...'}' ({k} flights)" for r, k in best)
+    return f" Main reasons: {shown}."
 
 
 # --------------------------------------------------------------------------- outcome

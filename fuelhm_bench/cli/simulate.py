@@ -110,8 +110,10 @@ def register(sub) -> None:
                    help="growth law from the onset (default step)")
     p.add_argument("--ramp-flights", type=bounded(int, 1, MAX_FLIGHTS), default=10,
                    help="flights from onset to maximum (default 10)")
-    p.add_argument("--dispersion", type=bounded(float, 0.0, 10.0), default=1.0,
-                   help="scale of the manufacturing dispersion, in [0, 10] (default 1)")
+    # 3 = physics.model.MAX_DISPERSION_SCALE (the parser loads no simulator; tests/test_cli_errors.py compares them)
+    p.add_argument("--dispersion", type=bounded(float, 0.0, 3.0), default=1.0,
+                   help="scale of the manufacturing dispersion, in [0, 3] (default 1); lower for a model near "
+                        "a parameter's bound")
     add_model_arguments(p)
     p.add_argument("--batch-size", type=positive_int, default=8, help="flights simulated together (memory bound)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
@@ -148,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.flights.mission import MissionProfile
     from fuelhm_bench.flights.schedule import ModeSchedule
     from fuelhm_bench.io import FlightWriter, labels_path_for
-    from fuelhm_bench.physics.model import Dispersion
+    from fuelhm_bench.physics.model import Dispersion, dispersion_error, max_dispersion_scale
 
     model = model_from_args(args)
     schedules, seen = [], {}
@@ -160,9 +162,14 @@ def run(args: argparse.Namespace) -> int:
         if f > 0:
             schedules.append(ModeSchedule(mode, 1.0, onset_min, onset_max, args.growth, args.ramp_flights, f))
     mission = MissionProfile(duration_s=args.minutes * 60.0, frame_s=model.controller.frame_s)
+    limit = max_dispersion_scale(model)
+    if args.dispersion > limit:
+        error = dispersion_error(model, dataclasses.replace(Dispersion(), scale=args.dispersion))
+        raise ParameterError(f"--dispersion must be in [0, {limit:g}] for this model (every unit it can manufacture "
+                             f"must be valid; at 3 standard deviations: {error}). Got {args.dispersion:g} instead.")
+    dispersion = dataclasses.replace(Dispersion(), scale=args.dispersion)
     config = FleetConfig(n_units=args.units, n_flights=args.flights, mission=mission, nominal=model,
-                         dispersion=dataclasses.replace(Dispersion(), scale=args.dispersion),
-                         schedules=tuple(schedules), seed=args.seed)
+                         dispersion=dispersion, schedules=tuple(schedules), seed=args.seed)
     check_output(labels_path_for(out), force=args.force, kind="table", what="labels file",
                  inputs={"--model": args.model})
     units = {u.unit_id: u for u in build_units(config)}

@@ -867,15 +867,15 @@ class SurrogateModel:
                             index=pd.Index(self.names, name="indicator"))
 
 
-def _fit_healthy(x, valid, units, z, penalty):
+def _fit_healthy(x, valid, units, z, penalty, names):
     mean, coef_map, between, resid, rvalid, c, lam = _healthy_parts(x, valid, units, z, penalty)
     if not len(resid):
         raise DataFormatError("The healthy table of the surrogate needs at least one unit with two flights or "
                               "more (its flight-to-flight residuals). Got none.")
     if not np.all(np.isfinite(mean)):
-        bad = np.flatnonzero(~np.isfinite(mean))
-        raise DataFormatError(f"The healthy table of the surrogate has no valid value of indicator(s) "
-                              f"{bad.tolist()}.")
+        bad = ", ".join(names[i] for i in np.flatnonzero(~np.isfinite(mean)))
+        raise DataFormatError(f"The healthy table of the surrogate has no valid value of the indicator(s) {bad}: "
+                              f"its flights never excite them.")
     return mean, coef_map, between, resid, rvalid, c, lam
 
 
@@ -968,7 +968,7 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
                               f"{[COORDINATE_PREFIX + c for c in absent]} of the healthy table.")
     x, valid = _values(healthy, names)
     labels, inverse, z = _unit_rows(healthy, coords)
-    mean, coef_map, between, resid, rvalid, c, h_pen = _fit_healthy(x, valid, inverse, z, penalty)
+    mean, coef_map, between, resid, rvalid, c, h_pen = _fit_healthy(x, valid, inverse, z, penalty, names)
     coords = coords[:c]
     (knots, learnt, r_mean, r_map, resp, invalid, r_pen, flight, pairs, pair_knots,
      interactions) = _responses(doe, names, modes, coords, penalty)
@@ -997,7 +997,8 @@ def fit_surrogate(healthy: pd.DataFrame, doe: pd.DataFrame, *, modes: tuple | No
             rows = np.concatenate([index[i] for i in pick])
             new_units = np.concatenate([np.full(len(index[i]), b) for b, i in enumerate(pick)])
             try:
-                _, a, b_cov, r, rv, _, _ = _fit_healthy(x[rows], valid[rows], new_units, z[pick][:, :c], h_pen)
+                _, a, b_cov, r, rv, _, _ = _fit_healthy(x[rows], valid[rows], new_units, z[pick][:, :c], h_pen,
+                                                        names)
             except DataFormatError:
                 continue
             rr = r[rv.all(axis=1)]

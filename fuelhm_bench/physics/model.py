@@ -246,17 +246,26 @@ def load_model(path: str | Path) -> LoopModel:
     return LoopModel.from_dict(data or {}, source=str(path))
 
 
+#: Manufacturing draws are truncated at this many standard deviations (:func:`manufacturing_draws`).
+DISPERSION_TRUNCATION: float = 3.0
+#: Largest :attr:`Dispersion.scale`. The draws being truncated at 3 standard deviations, the most dispersed
+#: parameters of the default dispersion (spool friction, aerodynamic load: 10 %) then stay within 90 % of
+#: their nominal value, so no manufactured parameter changes sign (at 3.33 the spool friction reaches 0).
+MAX_DISPERSION_SCALE: float = 3.0
+
+
 @dataclass(frozen=True)
 class Dispersion:
     """Manufacturing dispersion of a unit around its nominal parameters.
 
     Each listed parameter is multiplied by ``1 + rel_std * N(0, 1)`` (truncated
-    at 3 sigma) except additive ones (currents in A, drawn as ``+ std * N(0,1)``).
+    at :data:`DISPERSION_TRUNCATION` = 3 sigma) except additive ones (currents in A,
+    drawn as ``+ std * N(0,1)``).
 
     Parameters
     ----------
     scale : float, default=1.0
-        Multiplies every standard deviation (0 gives identical units).
+        Multiplies every standard deviation (0 gives identical units), in [0, :data:`MAX_DISPERSION_SCALE`].
     relative : tuple of (path, rel_std)
         Multiplicative dispersions.
     additive : tuple of (path, std)
@@ -282,17 +291,69 @@ class Dispersion:
     )
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.scale, (int, float)) and math.isfinite(self.scale) and 0.0 <= self.scale <= 10.0):
-            raise range_error("Dispersion.scale", "in [0, 10]", self.scale)
+        if not (isinstance(self.scale, (int, float)) and math.isfinite(self.scale)
+                and 0.0 <= self.scale <= MAX_DISPERSION_SCALE):
+            raise range_error("Dispersion.scale", f"in [0, {MAX_DISPERSION_SCALE:g}]", self.scale)
+
+    def extremes(self, nominal: LoopModel) -> list[tuple[str, float]]:
+        """``(path, value)`` of each dispersed parameter at both ends of its truncated draws around ``nominal``.
+
+        A unit's parameters lie within these values (each one alone; every corner of the box is a
+        unit too). Relative parameters first, then additive ones, low end before high end.
+        """
+        n_rel = len(self.relative)
+        out = []
+        for i, (path, std) in enumerate((*self.relative, *self.additive)):
+            for z in (-DISPERSION_TRUNCATION, DISPERSION_TRUNCATION):
+                step = std * z * self.scale
+                out.append((path, nominal.get(path) * (1.0 + step) if i < n_rel else nominal.get(path) + step))
+        return out
+
+
+def dispersion_error(nominal: LoopModel, dispersion: Dispersion = Dispersion()) -> FuelHMError | None:
+    """The physics error of a unit that ``dispersion`` can manufacture around ``nominal``, or None if there is none.
+
+    Each dispersed parameter is set, alone, to both ends of its truncated draws
+    (:meth:`Dispersion.extremes`); the first value its component refuses gives the error
+    (``"The 'ServovalveParams.discharge_coefficient' parameter must be ..."``).
+    """
+    for path, value in dispersion.extremes(nominal):
+        try:
+            nominal.with_parameters({path: value})
+        except FuelHMError as exc:
+            return exc
+    return None
+
+
+def max_dispersion_scale(nominal: LoopModel, dispersion: Dispersion = Dispersion()) -> float:
+    """Largest scale in [0, :data:`MAX_DISPERSION_SCALE`] at which :func:`dispersion_error` finds no error (to 1e-3).
+
+    Examples
+    --------
+    >>> max_dispersion_scale(LoopModel())
+    3.0
+    """
+    def ok(scale: float) -> bool:
+        return dispersion_error(nominal, dataclasses.replace(dispersion, scale=scale)) is None
+
+    if ok(MAX_DISPERSION_SCALE):
+        return MAX_DISPERSION_SCALE
+    low, high = 0.0, MAX_DISPERSION_SCALE
+    while high - low > 1e-3:
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if ok(mid) else (low, mid)
+    return math.floor(low * 1e3) / 1e3
 
 
 def manufacturing_draws(rng: np.random.Generator, dispersion: Dispersion = Dispersion()) -> np.ndarray:
-    """The standardised draws of :func:`manufacture` (relative parameters, then additive), clipped at 3.
+    """The standardised draws of :func:`manufacture` (relative parameters, then additive), clipped at
+    :data:`DISPERSION_TRUNCATION`.
 
     What :func:`dispersion_coordinates` recovers from the unit (where the dispersion is not 0), without
     building the unit.
     """
-    return np.clip(rng.standard_normal(len(dispersion.relative) + len(dispersion.additive)), -3.0, 3.0)
+    n = len(dispersion.relative) + len(dispersion.additive)
+    return np.clip(rng.standard_normal(n), -DISPERSION_TRUNCATION, DISPERSION_TRUNCATION)
 
 
 def dispersion_coordinates(model: LoopModel, nominal: LoopModel, dispersion: Dispersion = Dispersion(),

@@ -45,7 +45,7 @@ from fuelhm_bench.scenarios._fields import (
     show,
     unknown_key,
 )
-from fuelhm_bench.scenarios.schema import SUPPORTED_SCHEMA_VERSIONS, Scenario
+from fuelhm_bench.scenarios.schema import NAME_PATTERN, SUPPORTED_SCHEMA_VERSIONS, Scenario
 
 __all__ = ["MAX_DEPTH", "MAX_EXPANDED_NODES", "MAX_FILE_BYTES", "load_scenario_file", "parse_scenario"]
 
@@ -295,7 +295,7 @@ def _fail(source: str, line: int | None, text_allowed: str, given: str, hint: st
     return ScenarioValidationError([Problem("", text_allowed, given, hint, source=source, line=line)])
 
 
-def parse_scenario(text: str, source: str = "<string>") -> Scenario:
+def parse_scenario(text: str, source: str = "<string>", *, file_name: str | None = None) -> Scenario:
     """Parse and validate scenario YAML text.
 
     Parameters
@@ -304,6 +304,9 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         The YAML document.
     source : str, default="<string>"
         Name used in error messages (normally the file path).
+    file_name : str or None, default=None
+        The name of the file without its suffix (``"paper_2012"``): the ``name`` the document
+        must declare (:func:`load_scenario_file` passes it); None: not checked.
 
     Returns
     -------
@@ -347,7 +350,9 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
                         show(walker.scalar(root)))
         _check_schema_version(walker, root)
         scenario = walker.spec(Scenario, root, "")
-        if scenario is _FAILED:
+        if file_name is not None:
+            _check_file_name(walker, root, file_name)
+        if scenario is _FAILED or walker.problems:
             raise ScenarioValidationError(walker.located())
         return scenario
     except yaml.MarkedYAMLError as exc:  # malformed YAML, or a tag the safe loader refuses
@@ -379,8 +384,27 @@ def _check_schema_version(walker: _Walker, root: yaml.MappingNode) -> None:
                     source=walker.source, line=key_node.start_mark.line + 1)])
 
 
+def _check_file_name(walker: _Walker, root: yaml.MappingNode, file_name: str) -> None:
+    """A problem on ``name`` when it differs from the file's name: a scenario's id is ``<name>-v<version>``,
+    so an edited copy saved under another file name would otherwise be reported under the original's id."""
+    named = [(k, v) for k, v in root.value if k.tag != "tag:yaml.org,2002:merge" and walker.scalar(k) == "name"]
+    if not named:
+        return  # reported as a missing key
+    value_node = named[-1][1]  # merged keys first (flattened by the walk), explicit keys override them
+    name = walker.scalar(value_node)
+    if not isinstance(name, str) or name == file_name or not re.fullmatch(NAME_PATTERN, name):
+        return  # equal, or reported as an invalid name
+    hint = (f"Set name: {file_name}, or rename the file to {name}.yaml." if re.fullmatch(NAME_PATTERN, file_name)
+            else f"Rename the file to {name}.yaml ('{file_name}' is not a scenario name: a lowercase identifier).")
+    walker.add(Problem("name", f"'{file_name}', the file's name without its suffix (the id is <name>-v<version>)",
+                       show(name), hint), value_node)
+
+
 def load_scenario_file(path: str | Path) -> Scenario:
     """Load and validate a scenario YAML file.
+
+    Its ``name`` must be the file's name without the suffix (``scenarios/paper_2012.yaml``
+    declares ``name: paper_2012``).
 
     Parameters
     ----------
@@ -394,7 +418,8 @@ def load_scenario_file(path: str | Path) -> Scenario:
     Raises
     ------
     ScenarioError
-        If the file cannot be read, is not well-formed YAML or fails validation.
+        If the file cannot be read, is not well-formed YAML or fails validation (including a
+        ``name`` other than the file's).
     """
     path = Path(path)
     try:
@@ -407,4 +432,4 @@ def load_scenario_file(path: str | Path) -> Scenario:
     except (OSError, UnicodeDecodeError) as exc:
         reason = getattr(exc, "strerror", None) or str(exc)
         raise ScenarioError(f"Cannot read the scenario file {path}: {reason}.") from None
-    return parse_scenario(text, source=str(path))
+    return parse_scenario(text, source=str(path), file_name=path.stem)

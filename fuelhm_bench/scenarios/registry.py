@@ -92,10 +92,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         raise UnknownNameError(f"Unknown scenario '{text}'. Shipped scenarios: {names}.{' ' + hint if hint else ''} "
                                f"(A file path must end in .yaml or contain a '/'.)")
     file = files[base]
-    scenario = parse_scenario(file.read_text(encoding="utf-8"), source=_display(file))
-    if scenario.name != base:
-        raise ScenarioError(f"{_display(file)}: the shipped file {base}.yaml declares name '{scenario.name}'; "
-                            f"the name must match the file name.")
+    scenario = parse_scenario(file.read_text(encoding="utf-8"), source=_display(file), file_name=base)
     if m and m.group("version") is not None:
         asked = int(m.group("version"))
         if asked < scenario.version:

@@ -58,7 +58,8 @@ from fuelhm_bench.flights.schedule import GROWTH_LAWS, ModeSchedule, UnknownFaul
 from fuelhm_bench.physics.degradations import LAWS
 from fuelhm_bench.physics.effects import EFFECTS, make_effect
 from fuelhm_bench.physics.lvdt import LvdtParams
-from fuelhm_bench.physics.model import COMPONENTS, Dispersion, LoopModel
+from fuelhm_bench.physics.model import (COMPONENTS, DISPERSION_TRUNCATION, MAX_DISPERSION_SCALE, Dispersion, LoopModel,
+                                        dispersion_error, max_dispersion_scale)
 from fuelhm_bench.scenarios._fields import Problem, Spec, option, parameter_docs, show, suggest, unknown_key
 from fuelhm_bench.scoring.config import ScoringConfig
 from fuelhm_bench.taxonomy import EFFECT_IDS, MODE_IDS
@@ -86,6 +87,10 @@ RUN_BUDGET_ENV: str = "FUELHM_RUN_BUDGET_FLIGHT_HOURS"
 #: (``tests/bench_physics.py``: 35.8-36.5 ms per flight-hour, see the README); used only to
 #: print an order of magnitude of a run's cost. It scales with the frame rate.
 SECONDS_PER_FLIGHT_HOUR_100HZ: float = 0.036
+#: Upper bound of every cost of a scenario's cost model [kUSD]: one billion US dollars, the order of the
+#: loss of an aircraft, far above any cost of one actuator event (the shipped failure cost is 500); a run's
+#: total then stays a finite number of kUSD (a cost of 1e308 overflowed to inf).
+MAX_COST_KUSD: int = 1_000_000
 #: Scenario names: lowercase identifiers (the ``-vN`` suffix is reserved for versions).
 NAME_PATTERN = r"[a-z][a-z0-9_]*"
 
@@ -306,13 +311,16 @@ class FleetSpec(Spec):
         Flights flown by each unit, in [1, 10000]; degradation onsets are indices into them.
     dispersion_scale : float, default=1.0
         Multiplies every standard deviation of the manufacturing dispersion
-        (:class:`~fuelhm_bench.physics.model.Dispersion`), in [0, 10]; 0 gives
-        identical units. Also used for the training fleet.
+        (:class:`~fuelhm_bench.physics.model.Dispersion`), in [0, 3]; 0 gives
+        identical units. Also used for the training fleet. The draws are truncated
+        at 3 standard deviations: at 3 the most dispersed parameters (10 %) move by
+        up to 90 %, and every unit so manufactured must be a valid model (a drift
+        that brings a parameter near its physical bound lowers the limit).
     """
 
     units: int = option(ge=1, le=MAX_UNITS)
     flights_per_unit: int = option(ge=1, le=MAX_FLIGHTS_PER_UNIT)
-    dispersion_scale: float = option(Dispersion().scale, ge=0.0, le=10.0)
+    dispersion_scale: float = option(Dispersion().scale, ge=0.0, le=MAX_DISPERSION_SCALE)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -681,21 +689,22 @@ class SeedSpec(Spec):
 class CostSpec(Spec):
     """Cost model behind rewards, in thousands of US dollars (kUSD).
 
-    The defaults are illustrative orders of magnitude, not airline data.
+    The defaults are illustrative orders of magnitude, not airline data. Every
+    cost is in [0, :data:`MAX_COST_KUSD`] (one billion US dollars).
     Intensity fractions refer to each mode's max_intensity in the scenario
     (the published maximal intensity), as in the scorer.
 
     Parameters
     ----------
     false_alarm_kusd : float, default=25.0
-        Cost of a removal of a unit that has no detectable fault (no fault found) [kUSD], >= 0.
+        Cost of a removal of a unit that has no detectable fault (no fault found) [kUSD], in [0, 1000000].
     undetected_flight_kusd : float, default=2.0
         Cost of each flight flown with a detectable fault that has not been
-        acted upon (risk exposure) [kUSD], >= 0.
+        acted upon (risk exposure) [kUSD], in [0, 1000000].
     failure_kusd : float, default=500.0
-        Cost of an in-flight failure, when a degradation reaches failure_fraction [kUSD], >= 0.
+        Cost of an in-flight failure, when a degradation reaches failure_fraction [kUSD], in [0, 1000000].
     repair_kusd : float, default=15.0
-        Cost of a correct maintenance action that repairs a faulty unit [kUSD], >= 0.
+        Cost of a correct maintenance action that repairs a faulty unit [kUSD], in [0, 1000000].
     detectable_fraction : float, default=0.25
         A fault is detectable from this fraction of its maximal intensity on,
         in (0, 1] (same default as the scorer's detectable_fraction).
@@ -704,10 +713,10 @@ class CostSpec(Spec):
         intensity, in (0, 1], > detectable_fraction.
     """
 
-    false_alarm_kusd: float = option(25.0, ge=0.0)
-    undetected_flight_kusd: float = option(2.0, ge=0.0)
-    failure_kusd: float = option(500.0, ge=0.0)
-    repair_kusd: float = option(15.0, ge=0.0)
+    false_alarm_kusd: float = option(25.0, ge=0.0, le=MAX_COST_KUSD)
+    undetected_flight_kusd: float = option(2.0, ge=0.0, le=MAX_COST_KUSD)
+    failure_kusd: float = option(500.0, ge=0.0, le=MAX_COST_KUSD)
+    repair_kusd: float = option(15.0, ge=0.0, le=MAX_COST_KUSD)
     detectable_fraction: float = option(ScoringConfig().detectable_fraction, gt=0.0, le=1.0)
     failure_fraction: float = option(1.0, gt=0.0, le=1.0)
 
@@ -731,7 +740,7 @@ class Scenario(Spec):
     schema_version : int
         Version of the scenario file format; only 1 exists.
     name : str
-        Scenario name, a lowercase identifier (a shipped scenario's file is <name>.yaml).
+        Scenario name, a lowercase identifier; a scenario file is <name>.yaml (the loader checks it).
     version : int
         Scenario version, >= 1: increment it for any change that alters simulated
         data or scores (the id is <name>-v<version>).
@@ -1054,7 +1063,25 @@ class Scenario(Spec):
                 build()
             except FuelHMError as exc:
                 problems.append(_physics_problem(exc, label, getattr(self, label).to_dict()))
-        return problems
+        return problems or self._dispersion_checks()
+
+    def _dispersion_checks(self) -> list[Problem]:
+        """Every unit the dispersion can manufacture (draws at their truncation) is a valid model, in both fleets."""
+        dispersion = self.dispersion()
+        for model, fleet in ((self.truth_model(), "the training and scored fleets"),
+                             (self.drifted_model(), "the drifted scored fleet (lower the dispersion or the drift)")):
+            exc = dispersion_error(model, dispersion)
+            if exc is None:
+                continue
+            m = _PARAM_MSG.match(str(exc))
+            detail = (f"{m.group('name')} must be {m.group('allowed')} and would reach {m.group('given')}" if m
+                      else str(exc))
+            return [Problem("fleet.dispersion_scale",
+                            f"in [0, {max_dispersion_scale(model, dispersion):g}] here: every unit it can manufacture "
+                            f"must be a valid model", show(self.fleet.dispersion_scale),
+                            f"At {DISPERSION_TRUNCATION:g} standard deviations (where the draws are truncated), "
+                            f"{detail} in {fleet}.")]
+        return []
 
     def _mission_problem(self, exc: ParameterError) -> Problem:
         m = _PARAM_MSG.match(str(exc))
