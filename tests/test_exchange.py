@@ -96,6 +96,7 @@ def test_export_refuses_to_overwrite(exported):
     (lambda d: d.assign(unit_id=np.where(d["split"] == "calibration", 12345, d["unit_id"])),
      r"line \d+: a 'calibration' row names flight 0 of unit 12345, which is not one of the calibration flights"),
     (lambda d: pd.concat([d, d[d["split"] == "calibration"].iloc[:1]]), r"line \d+: a 'calibration' row repeats"),
+    (lambda d: pd.concat([d, d[d["split"] == "test"].iloc[:1]]), r"line \d+: a 'test' row repeats flight 0 of unit 0"),
     (lambda d: pd.concat([d, d[d["split"] == "test"].assign(split="calibration")]),  # the scored flights' scores
      r"line \d+: a 'calibration' row names flight 0 of unit 0, which is not one"),
     # guilt: the sum and the rule with the line (it said "an invalid guilt at flight 12 of unit 0")

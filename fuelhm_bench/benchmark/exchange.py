@@ -29,7 +29,7 @@ from fuelhm_bench.taxonomy import MODE_IDS
 
 __all__ = ["DECISION_FILE_COLUMNS", "EXPORT_LABEL_COLUMNS", "EXPORT_MANIFEST", "FILE_GUILT_SUM_TOLERANCE",
            "ScenarioTables", "check_calibration", "check_fingerprint", "check_flights", "export_scenario",
-           "read_decisions", "scenario_tables", "score_decisions", "score_tables"]
+           "read_decisions", "scenario_tables", "score_decisions"]
 
 #: Required columns of a decisions file (``guilt_<mode>`` are optional: zeros when absent).
 DECISION_FILE_COLUMNS: tuple[str, ...] = ("split", "unit_id", "flight_index", "score", "alarm")
@@ -448,22 +448,38 @@ def check_flights(decisions: pd.DataFrame, labels: pd.DataFrame, path, line) -> 
         named = sorted(set(decisions.loc[unknown, "unit_id"].tolist()))
         raise DataFormatError(f"{path}, {line(i)}: column 'unit_id' names {len(named)} unit(s) the scenario does "
                               f"not have: {show_value(named)}; {fleet}. {SAME_OPTIONS}")
-    keys = ["unit_id", "flight_index"]
-    given = pd.MultiIndex.from_frame(decisions[keys])
-    scored = pd.MultiIndex.from_frame(labels[keys])
-    extra = ~given.isin(scored)
+    scored = pd.MultiIndex.from_frame(labels[list(_KEYS)])
+    extra, repeated, missing = _key_mismatch(decisions, scored)
     if extra.any():
         i = decisions.index[np.flatnonzero(extra)[0]]
         unit, k = decisions.loc[i, "unit_id"], decisions.loc[i, "flight_index"]
         raise DataFormatError(f"{path}, {line(i)}: column 'flight_index' must be a scored flight of unit {unit}, "
                               f"0 to {units[unit]}. Got {k} instead ({int(extra.sum())} row(s) name flights the "
                               f"scenario does not have). {SAME_OPTIONS}")
-    missing = ~scored.isin(given)
+    _refuse_repeated(decisions, repeated, "test", "test.parquet", path, line)
     if missing.any():
         unit, k = scored[np.flatnonzero(missing)[0]]
         raise DataFormatError(f"{path}: {int(missing.sum())} scored flight(s) have no 'test' row, e.g. flight {k} "
                               f"of unit {unit}; the 'test' rows must cover exactly the flights of test.parquet "
                               f"({fleet}). {SAME_OPTIONS}")
+
+
+_KEYS = ("unit_id", "flight_index")
+
+
+def _key_mismatch(rows: pd.DataFrame, expected: pd.MultiIndex) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Masks of ``rows`` naming a flight not in ``expected`` and repeating an earlier row, and of ``expected``
+    flights no row names."""
+    given = pd.MultiIndex.from_frame(rows[list(_KEYS)])
+    return ~given.isin(expected), given.duplicated(), ~expected.isin(given)
+
+
+def _refuse_repeated(rows: pd.DataFrame, repeated: np.ndarray, split: str, flights: str, path, line) -> None:
+    """Refuse the first of ``rows`` that repeats an earlier row's flight, with its line."""
+    if repeated.any():
+        i = rows.index[np.flatnonzero(repeated)[0]]
+        raise DataFormatError(f"{path}, {line(i)}: a {split!r} row repeats flight {rows.loc[i, 'flight_index']} of "
+                              f"unit {rows.loc[i, 'unit_id']}; one row per flight of {flights}.")
 
 
 def check_calibration(calibration: pd.DataFrame, training: pd.DataFrame, path, line) -> None:
@@ -489,24 +505,16 @@ def check_calibration(calibration: pd.DataFrame, training: pd.DataFrame, path, l
         Naming the file, and the line of the first unknown or repeated flight, or how many
         calibration flights have no row.
     """
-    keys = ["unit_id", "flight_index"]
-    expected = pd.MultiIndex.from_frame(training.loc[training["split"] == "calibration", keys].astype(np.int64))
-    given = pd.MultiIndex.from_frame(calibration[keys])
+    expected = pd.MultiIndex.from_frame(training.loc[training["split"] == "calibration", list(_KEYS)].astype(np.int64))
+    extra, repeated, missing = _key_mismatch(calibration, expected)
     where = (f"the calibration flights of training.parquet: {len(expected)} flights of units "
              f"{expected.get_level_values(0).min()} to {expected.get_level_values(0).max()}")
-    extra = ~given.isin(expected)
     if extra.any():
         i = calibration.index[np.flatnonzero(extra)[0]]
         raise DataFormatError(f"{path}, {line(i)}: a 'calibration' row names flight {calibration.loc[i, 'flight_index']} "
                               f"of unit {calibration.loc[i, 'unit_id']}, which is not one of {where} "
                               f"({int(extra.sum())} row(s) like it). {SAME_OPTIONS}")
-    repeated = given.duplicated()
-    if repeated.any():
-        i = calibration.index[np.flatnonzero(repeated)[0]]
-        raise DataFormatError(f"{path}, {line(i)}: a 'calibration' row repeats flight "
-                              f"{calibration.loc[i, 'flight_index']} of unit {calibration.loc[i, 'unit_id']}; "
-                              f"one row per flight of {where}.")
-    missing = ~expected.isin(given)
+    _refuse_repeated(calibration, repeated, "calibration", where, path, line)
     if missing.any():
         unit, k = expected[np.flatnonzero(missing)[0]]
         raise DataFormatError(f"{path}: {int(missing.sum())} of {where} have no 'calibration' row, e.g. flight {k} "
@@ -514,18 +522,21 @@ def check_calibration(calibration: pd.DataFrame, training: pd.DataFrame, path, l
                               f"{SAME_OPTIONS}")
 
 
-def score_decisions(path, scenario, *, config=None, exported=None, **kwargs):
+def score_decisions(path, scenario, *, config=None, exported=None, on_tables=None, **kwargs):
     """Score a decisions file against a scenario's labels.
 
     Parameters
     ----------
     path : path-like
-        Decisions file (docs/scoring.md, "External methods").
+        Decisions file (docs/scoring.md, "External methods"); read and checked first, so a bad file
+        is refused before any flight is simulated.
     scenario : str, Path or Scenario
     config : ScoringConfig or None, default=None
     exported : path-like or None, default=None
         The folder ``export`` wrote the decisions' flights into: its :data:`EXPORT_MANIFEST` must
         match the flights scored (:func:`check_fingerprint`).
+    on_tables : callable or None, default=None
+        Called with the :class:`ScenarioTables` scored against (e.g. to print their fingerprint).
     **kwargs
         ``fidelity, seed, scale, flight_minutes, cache_dir`` of :func:`scenario_tables`
         (the same as at export).
@@ -539,24 +550,20 @@ def score_decisions(path, scenario, *, config=None, exported=None, **kwargs):
     DataFormatError
         Naming the file, for an invalid file or flights that do not match the scenario's.
     """
-    tables = scenario_tables(scenario, **kwargs)
-    if exported is not None:
-        check_fingerprint(tables, exported)
-    return score_tables(path, tables, config)
-
-
-def score_tables(path, tables: ScenarioTables, config=None):
-    """Score a decisions file against the flights of ``tables`` (:func:`score_decisions` once they are built)."""
     from fuelhm_bench.scoring import Run, score_run
 
     decisions, calibration, line = _read_decisions(path)
-    labels = tables.labels
-    check_flights(decisions, labels, path, line)
+    tables = scenario_tables(scenario, **kwargs)
+    if exported is not None:
+        check_fingerprint(tables, exported)
+    if on_tables is not None:
+        on_tables(tables)
+    check_flights(decisions, tables.labels, path, line)
     check_calibration(calibration, tables.training, path, line)
     healthy = calibration["score"].to_numpy(dtype=float)
     decisions = decisions.reset_index(drop=True)
     try:
-        run = Run(labels=labels, decisions=decisions, healthy_scores=healthy, name=Path(path).stem)
+        run = Run(labels=tables.labels, decisions=decisions, healthy_scores=healthy, name=Path(path).stem)
     except DataFormatError as exc:
         raise DataFormatError(f"{path}: {exc}") from None
     return score_run(run, config)

@@ -43,17 +43,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, out_dir) -> int:
-    from fuelhm_bench.benchmark.exchange import check_fingerprint, scenario_tables, score_tables
+    from fuelhm_bench.benchmark.exchange import score_decisions
     from fuelhm_bench.scoring import headline_kpis, undefined_kpis
     from fuelhm_bench.scoring.bootstrap import scorecard_intervals
 
-    tables = scenario_tables(args.scenario, **scenario_kwargs(args))
-    if args.exported is not None:
-        check_fingerprint(tables, args.exported)
-    card = score_tables(args.decisions, tables)
-    f = tables.fingerprint()  # compare with the export's export.json (or pass --exported)
-    print(f"flights scored: {f['scenario']}, {f['fidelity']}, seed {f['seed']}, {f['scored_units']} units, "
-          f"{f['flight_minutes']:g} min; tables {f['tables_digest']}")
+    def identify(tables) -> None:  # to compare with the export's export.json (or pass --exported)
+        f = tables.fingerprint()
+        print(f"flights scored: {f['scenario']}, {f['fidelity']}, seed {f['seed']}, {f['scored_units']} units, "
+              f"{f['flight_minutes']:g} min; tables {f['tables_digest']}")
+
+    card = score_decisions(args.decisions, args.scenario, exported=args.exported, on_tables=identify,
+                           **scenario_kwargs(args))
     ci = scorecard_intervals(card).set_index("kpi")
     undefined = undefined_kpis(card)
     for kpi, value in headline_kpis(card).items():
