@@ -254,3 +254,43 @@ def test_dask_local_cluster_matches_the_local_run(board_config, tmp_path):
         rec = store.records().iloc[0]
         assert rec["provenance"]["package_version"] and rec["provenance"]["python"]
         assert rec["provenance"]["host"] and rec["created"]
+
+
+def test_secret_seeds_are_drawn_once_kept_in_the_store_and_hidden_from_the_plan(small_board, tmp_path):
+    """With the scenario's public master seed a submission rebuilt the scored fleet's fault schedule
+    from the public scenario file and scored 100 (probe4). Secret seeds are drawn from the OS, kept in the
+    store (a folder sealed methods cannot read) and reused when the run resumes."""
+    import dataclasses
+
+    from fuelhm_bench.scenarios import load_scenario
+
+    public = load_scenario(small_board.scenarios[0]).seeds.master
+    config = dataclasses.replace(small_board, methods=small_board.methods[:1], secret_seeds=2)
+    lines = []
+    board = run_board(config, tmp_path / "a", flight_minutes=FLIGHT_MINUTES, log=lines.append)
+    with ResultStore(tmp_path / "a" / "results.sqlite") as store:
+        seeds = store.secret_seeds(2)
+        recorded = sorted(store.records()["seed"])
+    assert len(set(seeds)) == 2 and public not in seeds and recorded == sorted(seeds)
+    assert len(board) == 2 and (board["status"] == "ok").all()
+    assert any("2 secret seed(s), kept in" in s for s in lines)
+    lines.clear()
+    run_board(config, tmp_path / "a", flight_minutes=FLIGHT_MINUTES, log=lines.append)  # resumed: the same seeds
+    assert any("2 of 2 evaluations already in" in s for s in lines)
+    with ResultStore(tmp_path / "b" / "results.sqlite") as other:  # another store, other seeds
+        assert not set(other.secret_seeds(2)) & set(seeds)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("secret_seeds: 2\nseeds: [1]\n", r"give seeds or secret_seeds, not both"),
+    ("secret_seeds: -1\n", r"secret_seeds must be an integer in \[0, 100\]"),
+    ("secret_seeds: yes\n", r"secret_seeds must be an integer in \[0, 100\] .*Got True"),
+])
+def test_bad_secret_seeds(tmp_path, text, match):
+    path = tmp_path / "lb.yaml"
+    path.write_text("methods: [a:B]\nscenarios: [x]\n" + text)
+    with pytest.raises(ScenarioError, match=match):
+        LeaderboardConfig.from_yaml(path)
+    assert main(["evaluate", "--method", "a:B", "--scenario", "paper_2012", "--seed", "1", "--secret-seeds", "1",
+                 "--out", str(tmp_path / "o")]) == 2
+    assert not (tmp_path / "o").exists()

@@ -43,6 +43,10 @@ class LeaderboardEntry:
     params: tuple = ()
 
 
+#: Most secret seeds a run may ask for (each is a full evaluation of every method on every scenario).
+MAX_SECRET_SEEDS = 100
+
+
 @dataclass(frozen=True)
 class LeaderboardConfig:
     """What a leaderboard run evaluates.
@@ -63,6 +67,12 @@ class LeaderboardConfig:
     limits : dict, default={}
         Other limits per method: ``cpu_s``, ``memory_mb``, ``log_kb``
         (:class:`~fuelhm_bench.methods.sandbox.Limits`).
+    secret_seeds : int, default=0
+        When > 0, evaluate on that many secret master seeds instead of ``seeds``: drawn from the
+        operating system at the first run and kept in the results store
+        (:meth:`~fuelhm_bench.benchmark.store.ResultStore.secret_seeds`). Public seeds let a
+        submission rebuild the scored fleet from the public scenario file; use secret ones for a
+        ranking of untrusted submissions.
     """
 
     methods: tuple
@@ -72,6 +82,7 @@ class LeaderboardConfig:
     timeout_s: float = 900.0
     fidelity: str | None = None
     limits: tuple = ()
+    secret_seeds: int = 0
 
     @classmethod
     def from_yaml(cls, path) -> LeaderboardConfig:
@@ -84,7 +95,7 @@ class LeaderboardConfig:
         data = read_yaml(path, "leaderboard file", ScenarioError)
         if not isinstance(data, dict):
             raise ScenarioError(f"{path}: a leaderboard file is a mapping with 'methods' and 'scenarios'.")
-        allowed = {"methods", "scenarios", "seeds", "scale", "timeout_s", "fidelity", "limits"}
+        allowed = {"methods", "scenarios", "seeds", "secret_seeds", "scale", "timeout_s", "fidelity", "limits"}
         for key in data:
             if key not in allowed:
                 import difflib
@@ -147,6 +158,13 @@ class LeaderboardConfig:
                                 f"each scenario's own master seed), e.g. [null] or [1, 2]. Got {seeds!r} instead.")
         if len(set(seeds)) < len(seeds):
             raise ScenarioError(f"{path}: seeds repeats a seed: {seeds!r}.")
+        secret = data.get("secret_seeds", 0)
+        if not (isinstance(secret, int) and not isinstance(secret, bool) and 0 <= secret <= MAX_SECRET_SEEDS):
+            raise ScenarioError(f"{path}: secret_seeds must be an integer in [0, {MAX_SECRET_SEEDS}] (how many secret "
+                                f"master seeds to evaluate on). Got {show_value(secret)} instead.")
+        if secret and "seeds" in data:
+            raise ScenarioError(f"{path}: give seeds or secret_seeds, not both (secret_seeds replaces the public "
+                                f"seeds).")
         scale = _number(path, "scale", data.get("scale", 1.0), positive=True)
         if scale > 1.0:
             raise ScenarioError(f"{path}: scale is the fraction of each scenario's test units kept, in (0, 1]. Got "
@@ -161,7 +179,7 @@ class LeaderboardConfig:
         except ParameterError as exc:
             raise ScenarioError(str(exc)) from None
         return cls(tuple(methods), tuple(str(s) for s in scenarios), tuple(seeds), scale, timeout, fidelity,
-                   tuple(sorted(limits.items())))
+                   tuple(sorted(limits.items())), secret)
 
 
 def _entry_text(item) -> str:
@@ -416,7 +434,8 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
     from fuelhm_bench.benchmark.views import write_views
 
     out = Path(out)
-    tasks = plan_tasks(config, shared_params)
+    # (with secret seeds, planned on the scenarios' own seeds first: every check before the store is opened)
+    tasks = plan_tasks(dataclasses.replace(config, seeds=(None,)) if config.secret_seeds else config, shared_params)
     limits = {**dict(config.limits), "wall_s": config.timeout_s}
     store_path = Path(store_path or default_store_path(out))
     hidden = {"the output folder (--out)": out.resolve(),
@@ -427,6 +446,10 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
     _check_shared_params(config, shared_params or {}, limits, [str(p) for p in hidden.values()])
     store = ResultStore(store_path)
     try:
+        if config.secret_seeds:  # drawn once, kept in the store (hidden from sealed methods), reused on resume
+            config = dataclasses.replace(config, seeds=tuple(store.secret_seeds(config.secret_seeds)))
+            tasks = plan_tasks(config, shared_params)
+            log(f"{config.secret_seeds} secret seed(s), kept in {store.path}")
         stored = store.keys()
         todo = [t for t in tasks if rerun or t.key not in stored]
         if len(todo) < len(tasks):
@@ -503,7 +526,7 @@ def _prepare(prepare_evaluation, scenario, seed, fidelity, scale, kwargs, progre
 
 
 def evaluation_config(methods: list[str], scenario: str, *, seed=None, scale: float = 1.0, timeout_s: float = 600.0,
-                      fidelity=None, limits: dict | None = None) -> LeaderboardConfig:
+                      fidelity=None, limits: dict | None = None, secret_seeds: int = 0) -> LeaderboardConfig:
     """The configuration of ``fuelhm-bench evaluate``: some methods on one scenario and seed.
 
     Raises
@@ -517,8 +540,7 @@ def evaluation_config(methods: list[str], scenario: str, *, seed=None, scale: fl
         if (problem := entry_point_problem(m)) is not None:
             raise ParameterError(f"--method {problem}")
     return LeaderboardConfig(tuple(LeaderboardEntry(m) for m in methods), (scenario,), (seed,), float(scale),
-                             float(timeout_s), fidelity, tuple(sorted((limits or {}).items())))
+                             float(timeout_s), fidelity, tuple(sorted((limits or {}).items())), int(secret_seeds))
 
 
 __all__ += ["build_data", "evaluation_config"]
-del dataclasses

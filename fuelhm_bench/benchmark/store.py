@@ -55,6 +55,10 @@ CREATE TABLE IF NOT EXISTS results (
     provenance TEXT NOT NULL,
     created TEXT NOT NULL
 );
+CREATE TABLE IF NOT EXISTS secret_seeds (
+    position INTEGER PRIMARY KEY,
+    seed INTEGER NOT NULL
+);
 CREATE TABLE IF NOT EXISTS artifacts (
     key TEXT NOT NULL,
     name TEXT NOT NULL,
@@ -145,6 +149,29 @@ class ResultStore:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    def secret_seeds(self, count: int) -> list[int]:
+        """The store's first ``count`` secret master seeds, drawn from the operating system when missing.
+
+        A leaderboard run with secret seeds (``secret_seeds`` in the leaderboard file, ``--secret-seeds``)
+        evaluates on seeds no submission can know: a public seed lets a method rebuild the scored fleet's
+        fault schedule from the public scenario file (docs/methods.md, isolation). They are drawn once,
+        kept here (a folder sealed methods cannot read), and reused when the run resumes, so its results
+        stay reproducible from the store.
+        """
+        import secrets
+
+        from fuelhm_bench.scenarios.schema import MAX_SEED
+
+        seeds = [s for (s,) in self._db.execute("SELECT seed FROM secret_seeds ORDER BY position")]
+        with self._db:
+            while len(seeds) < count:
+                seed = secrets.randbelow(MAX_SEED + 1)
+                if seed in seeds:
+                    continue
+                self._db.execute("INSERT INTO secret_seeds (position, seed) VALUES (?, ?)", (len(seeds), seed))
+                seeds.append(seed)
+        return seeds[:count]
 
     def has(self, key: str) -> bool:
         """Whether an evaluation with this key is stored."""

@@ -41,9 +41,26 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="address of an existing Dask scheduler (tcp://host:8786); see docs/methods.md")
     g.add_argument("--method-seed", type=non_negative_int, default=0, help="random_state passed to fit")
+    g.add_argument("--secret-seeds", type=secret_seed_count, default=None, metavar="K",
+                   help="evaluate on K secret master seeds instead of the public ones (drawn once, kept in the "
+                        "results store, reused on resume): public seeds let a submission rebuild the scored "
+                        "fleet from the scenario file; use this to rank untrusted submissions")
     g.add_argument("--cache-dir", default=None,
                    help="cache of simulated knowledge and flights (default: $FUELHM_BENCH_CACHE or "
                         "~/.cache/fuelhm-bench; shared by every worker of a remote cluster)")
+
+
+def secret_seed_count(text: str) -> int:
+    """``--secret-seeds``: an integer in [1, MAX_SECRET_SEEDS]."""
+    from fuelhm_bench.benchmark.leaderboard import MAX_SECRET_SEEDS
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= MAX_SECRET_SEEDS:
+        raise argparse.ArgumentTypeError(f"must be an integer in [1, {MAX_SECRET_SEEDS}]. Got {text!r} instead")
+    return value
 
 
 def limits_from(args, base: dict) -> dict:

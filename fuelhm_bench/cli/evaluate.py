@@ -48,8 +48,13 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.benchmark.loading import parse_params
 
     shared = parse_params(args.param)
+    if args.secret_seeds is not None and args.seed is not None:
+        from fuelhm_bench.errors import ParameterError
+
+        raise ParameterError("Give --seed or --secret-seeds, not both (--secret-seeds replaces the public seed).")
     config = evaluation_config(args.method, args.scenario, seed=args.seed, scale=args.scale, timeout_s=args.timeout,
-                               fidelity=args.fidelity, limits=limits_from(args, {}))  # bad options: nothing created
+                               fidelity=args.fidelity, limits=limits_from(args, {}),
+                               secret_seeds=args.secret_seeds or 0)  # bad options: nothing created
     out = check_results_dir(args.out, args.store, args.force)
     board = run_board(config, out, store_path=args.store, shared_params=shared, rerun=args.rerun, jobs=args.jobs,
                       scheduler=args.scheduler, method_seed=args.method_seed, cache_dir=args.cache_dir,

@@ -35,7 +35,8 @@ def run(args: argparse.Namespace) -> int:
     from fuelhm_bench.benchmark.leaderboard import LeaderboardConfig, run_board
 
     config = LeaderboardConfig.from_yaml(args.config)
-    changes = {"scale": args.scale, "fidelity": args.fidelity, "timeout_s": args.timeout}
+    changes = {"scale": args.scale, "fidelity": args.fidelity, "timeout_s": args.timeout,
+               "secret_seeds": args.secret_seeds}  # (replaces the file's seeds)
     config = dataclasses.replace(config, **{k: v for k, v in changes.items() if v is not None},
                                  limits=tuple(sorted(limits_from(args, dict(config.limits)).items())))
     out = check_results_dir(args.out, args.store, args.force)
