@@ -227,6 +227,35 @@ def test_a_cache_given_by_path_is_hidden_too(cache_dir, tmp_path, monkeypatch):
     assert "SPY FOUND: []" in found, found[-2000:]
 
 
+def test_earlier_output_folders_in_the_working_directory_are_hidden(evaluation, cache_dir, tmp_path, monkeypatch):
+    """The working directory is readable (it is on the import path), and an earlier run's output there held
+    ground truth: an adversarial probe read a leaderboard report's delays.csv (fault onsets) and older results
+    stores, and scored 100. Folders marked as fuelhm-bench output are now hidden too, wherever they sit."""
+    from fuelhm_bench.benchmark.harness import earlier_outputs
+    from fuelhm_bench.io.outputs import MANIFEST
+
+    project = tmp_path / "project"
+    old = project / "runs" / "old-board" / "paper_2012-v3"
+    old.mkdir(parents=True)
+    (project / "runs" / "old-board" / MANIFEST).write_text("paper_2012-v3\n")
+    (old / "delays.csv").write_text("unit_id,onset_internal_leakage\n0,3\n")
+    (project / "notes").mkdir()
+    (project / "notes" / "mine.csv").write_text("a\n1\n")  # not an output: stays readable
+    assert earlier_outputs(project) == [project / "runs" / "old-board"]
+    monkeypatch.chdir(project)
+    monkeypatch.setenv("FUELHM_BENCH_CACHE", str(cache_dir))
+    log = tmp_path / "spy.log"
+    outcome = run_in_env(Spy(dirs=(str(project),)), evaluation, log_path=log, timeout_s=120)
+    assert outcome.ok, outcome.message
+    if outcome.sandbox.startswith("no file-system restriction"):
+        pytest.skip(f"the file system is not sealed here: {outcome.sandbox}")
+    found = log.read_text()
+    assert "SPY FOUND: []" in found, found[-2000:]
+    from submissions import _hunt
+
+    assert any("delays.csv" in f for f in _hunt([str(project)]))  # the probe finds it when nothing is sealed
+
+
 def test_a_method_module_inside_a_hidden_folder_is_refused_first(tmp_path, monkeypatch):
     """``--out .`` with the method's module in the working directory: the output folder is hidden from sealed
     methods, so the module could not be imported there. The run is refused before any data is built, naming

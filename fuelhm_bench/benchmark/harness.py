@@ -51,6 +51,7 @@ import os
 import re
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -60,7 +61,7 @@ from fuelhm_bench.errors import DataFormatError, FuelHMError, ParameterError, Sc
 from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES, MODE_IDS, OBSERVATION_COLUMNS
 
 __all__ = ["EnvEvaluation", "Outcome", "action_from_decision", "check_training_indicators", "evaluate",
-           "observation_row", "prepare_evaluation", "run_in_env", "split_training"]
+           "earlier_outputs", "observation_row", "prepare_evaluation", "run_in_env", "split_training"]
 
 _ROW_INDEX = pd.Index(OBSERVATION_COLUMNS)
 
@@ -442,6 +443,62 @@ def _main_reasons(table: pd.DataFrame, names: list, top: int = 2) -> str:
     return f" Main reasons: {shown}."
 
 
+#: How deep and how many folders :func:`earlier_outputs` looks through.
+EARLIER_OUTPUTS_DEPTH, EARLIER_OUTPUTS_MAX_FOLDERS = 3, 20000
+
+
+def earlier_outputs(root: Path) -> list[Path]:
+    """Folders under ``root`` that hold earlier fuelhm-bench output: hidden from sealed methods too.
+
+    The working directory is readable by a sealed method (it is on its import path), and an earlier
+    run's output there holds ground truth: a leaderboard's reports (fault onsets in ``delays.csv``),
+    a results store, exported labels. A folder is such output when it holds the record
+    fuelhm-bench writes into its output folders (:data:`~fuelhm_bench.io.outputs.MANIFEST`), a
+    results store (``*.sqlite``, ``*.sqlite3``, ``*.db``) or exported labels
+    (:data:`~fuelhm_bench.benchmark.exchange.EXPORT_MANIFEST`). Looks ``EARLIER_OUTPUTS_DEPTH``
+    levels down, through at most ``EARLIER_OUTPUTS_MAX_FOLDERS`` folders, skipping hidden ones.
+    """
+    import os
+
+    from fuelhm_bench.benchmark.exchange import EXPORT_MANIFEST
+    from fuelhm_bench.filetypes import suffix_of
+    from fuelhm_bench.io.outputs import MANIFEST
+
+    root = Path(root).resolve()
+    found, seen = [], 0
+    for folder, dirs, files in os.walk(root):
+        seen += 1
+        depth = len(Path(folder).relative_to(root).parts)
+        marks = MANIFEST in files or EXPORT_MANIFEST in files or any(
+            suffix_of(f, "sqlite") and _is_results_store(Path(folder) / f) for f in files)
+        if marks and depth > 0:
+            found.append(Path(folder))
+            dirs[:] = []  # everything below is hidden with it
+            continue
+        dirs[:] = [d for d in dirs if not d.startswith(".") and depth < EARLIER_OUTPUTS_DEPTH]
+        if seen >= EARLIER_OUTPUTS_MAX_FOLDERS:
+            break
+    return found
+
+
+def _is_results_store(path: Path) -> bool:
+    """Whether ``path`` is an SQLite database with a ``results`` table (opened read-only)."""
+    import sqlite3
+
+    try:
+        with path.open("rb") as f:
+            if f.read(16) != b"SQLite format 3\x00":
+                return False
+        con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+        try:
+            return con.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'results'").fetchone() \
+                is not None
+        finally:
+            con.close()
+    except (OSError, sqlite3.Error):
+        return False
+
+
 # --------------------------------------------------------------------------- outcome
 @dataclass(frozen=True, eq=False)
 class Outcome:
@@ -687,7 +744,7 @@ def run_in_env(method, evaluation: EnvEvaluation, *, random_state: int = 0, time
     meta = {"scenario": evaluation.scenario.id, "fidelity": evaluation.fidelity,
             "costs": evaluation.scenario.costs}
     hidden = [default_cache_dir(), *([evaluation.cache_dir] if evaluation.cache_dir not in (None, False) else []),
-              *deny]
+              *earlier_outputs(Path.cwd()), *deny]
     sealed = SealedMethod(method, params=params, shared_params=shared_params, limits=limits, log_path=log_path,
                           deny=hidden)
     t0 = time.perf_counter()
