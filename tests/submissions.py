@@ -170,6 +170,30 @@ def _hunt(start_dirs, pids=()) -> list[str]:
     return found
 
 
+class ForgesFitTime(IdleCurrent):
+    """Spends ``seconds`` of CPU in ``fit`` and rewrites the fit time its sealed process reports (probe4)."""
+
+    def __init__(self, *, a=4.0, seconds=0.5):
+        self.a = a
+        self.seconds = seconds
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        super()._fit(healthy, knowledge=knowledge, raw_flights=raw_flights, rng=rng)
+        child = next((o for o in gc.get_objects() if type(o).__name__ == "_Child"), None)
+        if child is not None:
+            original = child.reply
+
+            def reply(**data):
+                if "wall_s" in data:
+                    data.update(wall_s=0.0001, cpu_s=0.0001)
+                return original(**data)
+
+            child.reply = reply
+        t = time.process_time()
+        while time.process_time() - t < self.seconds:
+            pass
+
+
 class Spy(IdleCurrent):
     """Walks its call stack and the heap, reads files and the parent's memory, looking for the ground truth.
 

@@ -12,7 +12,7 @@ from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
 from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.errors import ParameterError
 from fuelhm_bench.methods.sandbox import Limits, SealedMethod
-from submissions import Chatty, Hogs, IdleCurrent, Segfaults, Spins, Spy, SysExit
+from submissions import Chatty, ForgesFitTime, Hogs, IdleCurrent, Segfaults, Spins, Spy, SysExit
 from test_runner import tiny
 
 
@@ -225,6 +225,13 @@ def test_a_cache_given_by_path_is_hidden_too(cache_dir, tmp_path, monkeypatch):
         pytest.skip(f"the file system is not sealed here: {outcome.sandbox}")
     found = log.read_text()
     assert "SPY FOUND: []" in found, found[-2000:]
+
+
+def test_fit_time_is_measured_by_the_harness(evaluation):
+    """The method's process reported its own fit time, and a method rewrote it (0.0001 s for 3 s of work)."""
+    outcome = run_in_env(ForgesFitTime(seconds=0.5), evaluation, timeout_s=120)
+    assert outcome.ok, outcome.message
+    assert outcome.fit_seconds >= 0.5
 
 
 def test_earlier_output_folders_in_the_working_directory_are_hidden(evaluation, cache_dir, tmp_path, monkeypatch):
