@@ -231,6 +231,9 @@ def test_output_folder_without_store_is_not_overwritten(board_config, tmp_path, 
     ("seeds: [x]\n", r"seeds must be a non-empty list of integers"),
     ("limits: {memory_mb: 10}\n", r"limits: The 'memory_mb' parameter of Limits must be"),
     ("limits: {cpu: 10}\n", r"limits: unknown limit 'cpu'"),
+    ("secret_seeds: 2\nseeds: [1]\n", r"give seeds or secret_seeds, not both"),
+    ("secret_seeds: -1\n", r"secret_seeds must be an integer in \[0, 100\]"),
+    ("secret_seeds: yes\n", r"secret_seeds must be an integer in \[0, 100\] .*Got True"),
 ])
 def test_bad_config_values_name_the_field(tmp_path, text, match):
     cfg = tmp_path / "lb.yaml"
@@ -281,16 +284,7 @@ def test_secret_seeds_are_drawn_once_kept_in_the_store_and_hidden_from_the_plan(
         assert not set(other.secret_seeds(2)) & set(seeds)
 
 
-@pytest.mark.parametrize("text, match", [
-    ("secret_seeds: 2\nseeds: [1]\n", r"give seeds or secret_seeds, not both"),
-    ("secret_seeds: -1\n", r"secret_seeds must be an integer in \[0, 100\]"),
-    ("secret_seeds: yes\n", r"secret_seeds must be an integer in \[0, 100\] .*Got True"),
-])
-def test_bad_secret_seeds(tmp_path, text, match):
-    path = tmp_path / "lb.yaml"
-    path.write_text("methods: [a:B]\nscenarios: [x]\n" + text)
-    with pytest.raises(ScenarioError, match=match):
-        LeaderboardConfig.from_yaml(path)
+def test_seed_and_secret_seeds_are_exclusive(tmp_path):
     assert main(["evaluate", "--method", "a:B", "--scenario", "paper_2012", "--seed", "1", "--secret-seeds", "1",
                  "--out", str(tmp_path / "o")]) == 2
     assert not (tmp_path / "o").exists()
