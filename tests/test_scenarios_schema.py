@@ -71,7 +71,8 @@ def test_fields_are_keyword_only_and_normalised():
      "a number in [0, 3]"),
     (FleetSpec, {"units": 2, "flights_per_unit": 3, "dispersion_scale": 5}, "dispersion_scale",
      "a number in [0, 3]"),  # passed, then manufacture failed: "spool_friction_n must be >= 0" (seed-dependent)
-    (SensorSpec, {"noise_std_um": -1.0}, "noise_std_um", "a number >= 0"),
+    (SensorSpec, {"noise_std_um": -1.0}, "noise_std_um", "a number in [0, 10000]"),
+    (SensorSpec, {"noise_std_um": 2e4}, "noise_std_um", "a number in [0, 10000]"),  # 1e9 passed validate
     (MissionSpec, {"test_sweep": "yes"}, "test_sweep", "true or false"),
     (MissionSpec, {"duration_min": 1.5}, "duration_min", ">= (start_duration_s + 60 s) / 60 = 2 min"),
     (MissionSpec, {"sweep_low_mm": 40.0, "sweep_high_mm": 30.0}, "sweep_high_mm", "> sweep_low_mm (40 mm)"),

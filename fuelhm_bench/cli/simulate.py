@@ -30,8 +30,10 @@ def add_model_arguments(p: argparse.ArgumentParser) -> None:
                    help="switch on an optional physical effect (repeatable), e.g. rod_friction:coulomb_n=200")
     p.add_argument("--frame-rate", type=bounded(float, 1.0, 1e4, "Hz"), default=None, metavar="HZ",
                    help="FADEC frame / sample rate [Hz], in [1, 10000] (default 100)")
-    p.add_argument("--noise-um", type=bounded(float, 0.0, 1e4, "um"), default=None, metavar="UM",
-                   help="LVDT noise standard deviation [um]")
+    from fuelhm_bench.physics.lvdt import MAX_NOISE_STD_M
+
+    p.add_argument("--noise-um", type=bounded(float, 0.0, 1e6 * MAX_NOISE_STD_M, "um"), default=None, metavar="UM",
+                   help=f"LVDT noise standard deviation [um], in [0, {1e6 * MAX_NOISE_STD_M:g}]")
     p.add_argument("--adc-bits", type=bounded(int, 0, 24), default=None, metavar="BITS",
                    help="LVDT ADC resolution, in [0, 24] (0: none)")
 

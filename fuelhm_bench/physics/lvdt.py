@@ -18,7 +18,12 @@ import numpy as np
 from scipy.linalg import expm
 
 from fuelhm_bench.errors import range_error
-from fuelhm_bench.physics._validation import NON_NEGATIVE, check_fields
+from fuelhm_bench.physics._validation import check_fields
+
+
+#: Largest LVDT noise standard deviation [m]: 10 mm, a seventh of the 70 mm range (beyond it the reading
+#: is noise; a scenario's ``sensor.noise_std_um`` and ``simulate --noise-um`` are held to it).
+MAX_NOISE_STD_M: float = 0.01
 
 
 @dataclass(frozen=True)
@@ -32,7 +37,7 @@ class LvdtParams:
     damping : float, default=0.6
         Damping ratio of the demodulation filter [-].
     noise_std_m : float, default=3e-6
-        Standard deviation of the additive white noise [m].
+        Standard deviation of the additive white noise [m], in [0, :data:`MAX_NOISE_STD_M`].
     adc_bits : int, default=12
         ADC resolution [bits]; 0 disables quantization.
     range_min_m : float, default=-0.005
@@ -52,7 +57,7 @@ class LvdtParams:
         check_fields(self, {
             "bandwidth_hz": (1.0, 1e5, True),
             "damping": (0.05, 5.0, True),
-            "noise_std_m": NON_NEGATIVE,
+            "noise_std_m": (0.0, MAX_NOISE_STD_M, True),
             "range_min_m": (-1.0, 1.0, True),
             "range_max_m": (-1.0, 1.0, True),
         })

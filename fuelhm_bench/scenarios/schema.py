@@ -57,7 +57,7 @@ from fuelhm_bench.flights.mission import MissionProfile
 from fuelhm_bench.flights.schedule import GROWTH_LAWS, ModeSchedule, UnknownFault
 from fuelhm_bench.physics.degradations import LAWS
 from fuelhm_bench.physics.effects import EFFECTS, make_effect
-from fuelhm_bench.physics.lvdt import LvdtParams
+from fuelhm_bench.physics.lvdt import MAX_NOISE_STD_M, LvdtParams
 from fuelhm_bench.physics.model import (COMPONENTS, DISPERSION_TRUNCATION, MAX_DISPERSION_SCALE, Dispersion, LoopModel,
                                         dispersion_error, max_dispersion_scale)
 from fuelhm_bench.scenarios._fields import Problem, Spec, option, parameter_docs, show, suggest, unknown_key
@@ -435,12 +435,13 @@ class SensorSpec(Spec):
     Parameters
     ----------
     noise_std_um : float, default=3.0
-        Standard deviation of the additive white position noise [um], >= 0.
+        Standard deviation of the additive white position noise [um], in [0, 10000] (the LVDT's
+        ``MAX_NOISE_STD_M``).
     adc_bits : int, default=12
         ADC resolution over the LVDT range [bits], in [0, 24]; 0 disables quantization.
     """
 
-    noise_std_um: float = option(1e6 * _LVDT.noise_std_m, ge=0.0)
+    noise_std_um: float = option(1e6 * _LVDT.noise_std_m, ge=0.0, le=1e6 * MAX_NOISE_STD_M)
     adc_bits: int = option(_LVDT.adc_bits, ge=0, le=24)
 
 
