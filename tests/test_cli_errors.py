@@ -154,3 +154,20 @@ def test_ctrl_c_at_any_moment(tmp_path, delay_s):
     assert code == 130, err
     assert len(err.strip().splitlines()) == 1 and "interrupted" in err
     assert files == []
+
+
+@pytest.mark.parametrize("argv", [
+    ["evaluate", "--method", "fuelhm_baselines.trivial:NullMethod", "--scenario", "nope_scn"],
+    ["leaderboard", "--config", "CONFIG"],
+])
+def test_a_run_refused_at_its_scenario_leaves_no_output_folder(tmp_path, capsys, argv):
+    """evaluate / leaderboard created --out, then failed on the scenario and left the empty folder behind."""
+    config = tmp_path / "lb.yaml"
+    config.write_text("methods: [fuelhm_baselines.trivial:NullMethod]\nscenarios: [nope_scn]\n")
+    out = tmp_path / "out"
+    assert main([a.replace("CONFIG", str(config)) for a in argv] + ["--out", str(out)]) == 2
+    assert "Unknown scenario 'nope_scn'" in capsys.readouterr().err
+    assert not out.exists()
+    out.mkdir()  # a folder the user made stays
+    assert main([a.replace("CONFIG", str(config)) for a in argv] + ["--out", str(out)]) == 2
+    assert out.is_dir()

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
 from fuelhm_bench.cli._common import bounded, non_negative_int, positive_int
@@ -75,6 +77,20 @@ def limits_from(args, base: dict) -> dict:
 
         raise ParameterError(f"--memory must be >= 256 MiB. Got {out['memory_mb']:g} instead.")
     return out
+
+
+@contextlib.contextmanager
+def results_dir(out, store: str | None, force: bool) -> Iterator[Path]:
+    """:func:`check_results_dir`, and the folder it created removed again if the run fails before writing
+    anything there (a scenario that does not load left an empty --out behind)."""
+    existed = Path(out).exists()
+    path = check_results_dir(out, store, force)
+    try:
+        yield path
+    except BaseException:
+        if not existed and path.is_dir() and not any(path.iterdir()):
+            path.rmdir()
+        raise
 
 
 def check_results_dir(out: Path, store: str | None, force: bool) -> Path:

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from fuelhm_bench.cli._common import flight_minutes, non_negative_int, progress_bar, scale_fraction
-from fuelhm_bench.cli._harness import add_run_options, check_results_dir, limit_type, limits_from
+from fuelhm_bench.cli._harness import add_run_options, limit_type, limits_from, results_dir
 
 
 def register(sub) -> None:
@@ -55,10 +55,10 @@ def run(args: argparse.Namespace) -> int:
     config = evaluation_config(args.method, args.scenario, seed=args.seed, scale=args.scale, timeout_s=args.timeout,
                                fidelity=args.fidelity, limits=limits_from(args, {}),
                                secret_seeds=args.secret_seeds or 0)  # bad options: nothing created
-    out = check_results_dir(args.out, args.store, args.force)
-    board = run_board(config, out, store_path=args.store, shared_params=shared, rerun=args.rerun, jobs=args.jobs,
-                      scheduler=args.scheduler, method_seed=args.method_seed, cache_dir=args.cache_dir,
-                      flight_minutes=args.minutes, progress=progress_bar)
+    with results_dir(args.out, args.store, args.force) as out:
+        board = run_board(config, out, store_path=args.store, shared_params=shared, rerun=args.rerun, jobs=args.jobs,
+                          scheduler=args.scheduler, method_seed=args.method_seed, cache_dir=args.cache_dir,
+                          flight_minutes=args.minutes, progress=progress_bar)
     cols = [c for c in ("method", "params", "status", "summary_score", "fpr_standard_thr", "fnr_standard_thr", "fcr",
                         "cost_kusd") if c in board]
     print(board[cols].to_string(index=False))

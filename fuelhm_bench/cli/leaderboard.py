@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from fuelhm_bench.cli._common import flight_minutes, progress_bar, scale_fraction
-from fuelhm_bench.cli._harness import add_run_options, check_results_dir, limit_type, limits_from
+from fuelhm_bench.cli._harness import add_run_options, limit_type, limits_from, results_dir
 
 
 def register(sub) -> None:
@@ -39,10 +39,10 @@ def run(args: argparse.Namespace) -> int:
                "secret_seeds": args.secret_seeds}  # (replaces the file's seeds)
     config = dataclasses.replace(config, **{k: v for k, v in changes.items() if v is not None},
                                  limits=tuple(sorted(limits_from(args, dict(config.limits)).items())))
-    out = check_results_dir(args.out, args.store, args.force)
-    board = run_board(config, out, store_path=args.store, rerun=args.rerun, jobs=args.jobs, scheduler=args.scheduler,
-                      method_seed=args.method_seed, cache_dir=args.cache_dir, flight_minutes=args.minutes,
-                      progress=progress_bar)
+    with results_dir(args.out, args.store, args.force) as out:
+        board = run_board(config, out, store_path=args.store, rerun=args.rerun, jobs=args.jobs,
+                          scheduler=args.scheduler, method_seed=args.method_seed, cache_dir=args.cache_dir,
+                          flight_minutes=args.minutes, progress=progress_bar)
     cols = [c for c in ("scenario", "method", "params", "status", "summary_score") if c in board]
     print(board[cols].to_string(index=False))
     print(f"wrote {out / 'leaderboard.md'} and {out / 'index.html'}")
