@@ -307,3 +307,7 @@ def test_a_scenario_without_test_sweep_is_refused_with_its_file_and_fields(tmp_p
     assert message.startswith(f"{path} (no_sweep-v3): too few valid indicators in its 24 healthy training flights")
     assert "Valid in 0 flights: X1, Y1" in message and "Main reasons: '" in message
     assert "mission.test_sweep" in message and "HealthyModel" not in message
+    from fuelhm_bench.benchmark.exchange import scenario_tables  # export / score: the same rule, before writing
+
+    with pytest.raises(ScenarioError, match=r"no_sweep-v3\): too few valid indicators in its 24 healthy training"):
+        scenario_tables(path, fidelity=fidelity, knowledge_size=SMALL, cache_dir=cache_dir)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
 from pathlib import Path
 from typing import Any, Callable
 
@@ -153,7 +154,15 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
         raise ParameterError(f"The 'fidelity' parameter of scenario_tables must be 'physics', "
                              f"'surrogate' or None. Got {fidelity!r} instead.")
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
-    fit_part, cal_part = _split_training(training_indicators(sc, **common))
+    table = training_indicators(sc, **common)
+    from fuelhm_bench.benchmark.harness import check_training_indicators
+    from fuelhm_bench.envs import KnowledgeSize
+
+    size = KnowledgeSize.coerce(knowledge_size, "scenario_tables")  # (the same rule as evaluate's)
+    label = f"{scenario} ({sc.id})" if isinstance(scenario, (str, os.PathLike)) else f"scenario {sc.id}"
+    check_training_indicators(table, label, fidelity=fidelity, knowledge_flights=size.healthy_units * size.healthy_flights,
+                              flight_minutes=flight_minutes)
+    fit_part, cal_part = _split_training(table)
     training = pd.concat([fit_part.assign(split="fit"), cal_part.assign(split="calibration")],
                          ignore_index=True)
     config = sc.test_fleet_config()
