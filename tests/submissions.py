@@ -114,6 +114,25 @@ class Chatty(IdleCurrent):
         sys.stdout.flush()
 
 
+class Daemonizes(IdleCurrent):
+    """Leaves a daemon behind: a double fork with ``setsid``, out of its process group (probe4)."""
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        super()._fit(healthy, knowledge=knowledge, raw_flights=raw_flights, rng=rng)
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            os.setsid()
+            daemon = os.fork()
+            if daemon == 0:
+                time.sleep(600)
+                os._exit(0)
+            os.write(write, str(daemon).encode())
+            os._exit(0)
+        os.waitpid(pid, 0)
+        print(f"DAEMON {os.read(read, 32).decode()}", file=sys.stderr, flush=True)
+
+
 class Peeks(IdleCurrent):
     """Fails unless every row holds exactly the observation columns."""
 

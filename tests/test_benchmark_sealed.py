@@ -12,7 +12,7 @@ from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
 from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.errors import ParameterError
 from fuelhm_bench.methods.sandbox import Limits, SealedMethod
-from submissions import Chatty, ForgesFitTime, Hogs, IdleCurrent, Segfaults, Spins, Spy, SysExit
+from submissions import Chatty, Daemonizes, ForgesFitTime, Hogs, IdleCurrent, Segfaults, Spins, Spy, SysExit
 from test_runner import tiny
 
 
@@ -75,6 +75,20 @@ def test_logs_are_bounded_and_no_process_survives(evaluation, tmp_path):
     pid = int(text.split("ORPHAN ")[1].split()[0])
     time.sleep(0.5)
     assert _gone(pid), f"process {pid} started by the method survived the run"
+
+
+def test_a_daemon_that_left_the_process_group_does_not_survive(evaluation, tmp_path):
+    """A double fork with setsid escaped the process-group kill and outlived the run (probe4); the zygote is now
+    the subreaper of what methods start and kills what is left when a sealed process ends."""
+    log = tmp_path / "daemon.log"
+    outcome = run_in_env(Daemonizes(), evaluation, log_path=log, timeout_s=60)
+    assert outcome.ok, outcome.message
+    pid = int(log.read_text().split("DAEMON ")[1].split()[0])
+    for _ in range(40):
+        if _gone(pid):
+            break
+        time.sleep(0.05)
+    assert _gone(pid), f"the daemon {pid} survived the run"
 
 
 def test_an_unwritable_log_still_drains_the_method_output(evaluation, tmp_path):

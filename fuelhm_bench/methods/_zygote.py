@@ -23,9 +23,11 @@ sends ``ready``; each request is one JSON message ``{"scratch", "env"}`` with
 three descriptors attached (the sealed process's end of its socket, the write
 end of its log pipe, the write end of its status pipe); the reply is
 ``{"pid": N}``. When the sealed process ends, the zygote (its parent) reaps it
-and writes its wait status (decimal) to the status pipe. When the harness
-closes the control socket, the zygote kills the process groups of the sealed
-processes still running and exits.
+and writes its wait status (decimal) to the status pipe. The zygote is the
+subreaper of what the methods start (Linux): a daemon that left its method's
+process group (``setsid``) is re-parented to it and killed when a sealed process
+ends. When the harness closes the control socket, the zygote kills the process
+groups of the sealed processes still running, and every orphan, and exits.
 """
 
 from __future__ import annotations
@@ -112,20 +114,74 @@ def _await_session(pid: int, timeout_s: float = 5.0) -> None:
         time.sleep(0.0005)
 
 
-def _reap(children: dict[int, int]) -> None:
-    """Report the wait status of every ended sealed process on its status pipe."""
-    while children:
+def _become_subreaper() -> bool:
+    """Make this process the reaper of its orphaned descendants (Linux ``PR_SET_CHILD_SUBREAPER``).
+
+    A method can leave its process group: a double fork with ``setsid`` makes a daemon that the
+    harness's group kill misses. Its parent gone, the daemon becomes a child of the nearest subreaper:
+    the zygote, which kills it when a sealed process ends (:func:`_kill_orphans`).
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def _own_children() -> list[int]:
+    """The pids whose parent is this process (from ``/proc``)."""
+    me, found = os.getpid(), []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat", "rb") as f:
+                    ppid = int(f.read().rsplit(b")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+            if ppid == me:
+                found.append(int(entry))
+    return found
+
+
+def _kill_orphans(children: dict[int, int]) -> None:
+    """Kill this process's children that are not running sealed processes: what a method left behind.
+
+    Repeated a few times: killing an orphan re-parents its own children here.
+    """
+    for _ in range(8):
+        orphans = [pid for pid in _own_children() if pid not in children]
+        if not orphans:
+            return
+        for pid in orphans:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, signal.SIGKILL)
+        for pid in orphans:
+            with contextlib.suppress(ChildProcessError, OSError):
+                os.waitpid(pid, 0)
+
+
+def _reap(children: dict[int, int], orphans_too: bool = False) -> None:
+    """Report the wait status of every ended sealed process on its status pipe; with ``orphans_too``, once one
+    has ended, kill what the methods left behind (:func:`_kill_orphans`)."""
+    ended = False
+    while True:
         try:
             pid, status = os.waitpid(-1, os.WNOHANG)
         except ChildProcessError:
-            return
+            break
         if pid == 0:
-            return
+            break
         fd = children.pop(pid, None)
         if fd is not None:
+            ended = True
             with contextlib.suppress(OSError):  # the harness closed its end: nobody waits for this status
                 os.write(fd, str(status).encode())
             os.close(fd)
+    if ended and orphans_too:
+        _kill_orphans(children)
 
 
 def _drain(fd: int) -> None:
@@ -147,13 +203,14 @@ def serve(control: socket.socket) -> None:
     sel = selectors.DefaultSelector()
     sel.register(control, selectors.EVENT_READ, "control")
     sel.register(wake_r, selectors.EVENT_READ, "wake")
+    subreaper = _become_subreaper()
     control.sendall(b'{"status": "ready"}\n')
     try:
         while True:
             for key, _ in sel.select():
                 if key.data == "wake":
                     _drain(wake_r)
-                    _reap(children)
+                    _reap(children, orphans_too=subreaper)
                     continue
                 fds = array.array("i")
                 try:
@@ -187,6 +244,8 @@ def serve(control: socket.socket) -> None:
             with contextlib.suppress(ProcessLookupError, PermissionError):  # already gone
                 os.killpg(pid, signal.SIGKILL)
         _reap(children)
+        if subreaper:
+            _kill_orphans({})
 
 
 def main(argv: list[str]) -> None:
