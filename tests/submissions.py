@@ -133,6 +133,30 @@ class Daemonizes(IdleCurrent):
         print(f"DAEMON {os.read(read, 32).decode()}", file=sys.stderr, flush=True)
 
 
+class OpensSockets(IdleCurrent):
+    """Tries an IPv4 UDP socket (data off the machine, probe4), an IPv6 one, and a Unix socket pair."""
+
+    def _fit(self, healthy, *, knowledge, raw_flights, rng):
+        import socket
+
+        super()._fit(healthy, knowledge=knowledge, raw_flights=raw_flights, rng=rng)
+        for name, family, kind in (("UDP4", socket.AF_INET, socket.SOCK_DGRAM),
+                                   ("UDP6", socket.AF_INET6, socket.SOCK_DGRAM),
+                                   ("TCP4", socket.AF_INET, socket.SOCK_STREAM)):
+            try:
+                with socket.socket(family, kind) as s:
+                    if kind == socket.SOCK_DGRAM:
+                        s.sendto(b"labels?", ("127.0.0.1", 9) if family == socket.AF_INET else ("::1", 9))
+                print(name, "open", file=sys.stderr, flush=True)
+            except OSError as exc:
+                print(name, "refused", type(exc).__name__, file=sys.stderr, flush=True)
+        a, b = socket.socketpair()
+        a.sendall(b"x")
+        print("UNIX", "ok" if b.recv(1) == b"x" else "broken", file=sys.stderr, flush=True)
+        a.close()
+        b.close()
+
+
 class Peeks(IdleCurrent):
     """Fails unless every row holds exactly the observation columns."""
 

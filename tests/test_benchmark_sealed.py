@@ -12,7 +12,7 @@ from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
 from fuelhm_bench.envs import KnowledgeSize
 from fuelhm_bench.errors import ParameterError
 from fuelhm_bench.methods.sandbox import Limits, SealedMethod
-from submissions import Chatty, Daemonizes, ForgesFitTime, Hogs, IdleCurrent, Segfaults, Spins, Spy, SysExit
+from submissions import Chatty, Daemonizes, ForgesFitTime, Hogs, OpensSockets, IdleCurrent, Segfaults, Spins, Spy, SysExit
 from test_runner import tiny
 
 
@@ -89,6 +89,28 @@ def test_a_daemon_that_left_the_process_group_does_not_survive(evaluation, tmp_p
             break
         time.sleep(0.05)
     assert _gone(pid), f"the daemon {pid} survived the run"
+
+
+def test_internet_sockets_are_refused_unix_ones_work(evaluation, tmp_path):
+    """Landlock fences TCP only: a probe sent data off the machine over UDP. A seccomp filter now refuses
+    IPv4/IPv6 sockets; Unix sockets (multiprocessing, joblib) still work."""
+    log = tmp_path / "sockets.log"
+    outcome = run_in_env(OpensSockets(), evaluation, log_path=log, timeout_s=60)
+    assert outcome.ok, outcome.message
+    text = log.read_text()
+    assert "UNIX ok" in text, text[-2000:]
+    import platform
+    import sys
+
+    from fuelhm_bench.methods._sealed_child import _SECCOMP_ARCHES
+
+    if not (sys.platform.startswith("linux") and platform.machine() in _SECCOMP_ARCHES):
+        pytest.skip(f"no seccomp filter for {sys.platform} {platform.machine()}")
+    if "IPv4/IPv6 sockets not filtered" in outcome.sandbox:  # the filter was tried and refused by this kernel
+        pytest.skip(f"seccomp refused here: {outcome.sandbox}")
+    assert "no IPv4/IPv6 sockets" in outcome.sandbox, outcome.sandbox
+    for name in ("UDP4", "UDP6", "TCP4"):
+        assert f"{name} refused PermissionError" in text, text[-2000:]
 
 
 def test_an_unwritable_log_still_drains_the_method_output(evaluation, tmp_path):

@@ -86,6 +86,63 @@ def _landlock(readable: list[str], writable: list[str], listable: list[str] = ()
     return f"landlock abi {abi}: file system{extra}"
 
 
+# --------------------------------------------------------------------------- seccomp (linux/seccomp.h)
+#: (audit architecture, socket syscall numbers) of the architectures the network filter knows.
+_SECCOMP_ARCHES = {"x86_64": (0xC000003E, (41, 0x40000000 | 41)),  # native and x32 numbering
+                   "aarch64": (0xC00000B7, (198,))}
+
+
+class _SockFilter(ctypes.Structure):
+    _fields_ = [("code", ctypes.c_uint16), ("jt", ctypes.c_uint8), ("jf", ctypes.c_uint8), ("k", ctypes.c_uint32)]
+
+
+class _SockFprog(ctypes.Structure):
+    _fields_ = [("len", ctypes.c_uint16), ("filter", ctypes.POINTER(_SockFilter))]
+
+
+def _network_filter_program(machine: str) -> list[tuple[int, int, int, int]] | None:
+    """The seccomp program refusing IPv4/IPv6 sockets (``EACCES``), or None for an unknown architecture.
+
+    Landlock fences TCP ``bind``/``connect`` only; UDP stayed open and a probe sent data off the
+    machine with ``sendto``. A sealed method needs no Internet socket (``multiprocessing`` and joblib
+    use Unix sockets and pipes). System calls of another architecture (the 32-bit ``int 0x80`` entry on
+    x86_64, whose ``socketcall`` would pass this filter) are refused too.
+    """
+    known = _SECCOMP_ARCHES.get(machine)
+    if known is None:
+        return None
+    arch, numbers = known
+    ld, jeq, ret = 0x20, 0x15, 0x06  # BPF_LD|BPF_W|BPF_ABS, BPF_JMP|BPF_JEQ|BPF_K, BPF_RET|BPF_K
+    allow, deny = 0x7FFF0000, 0x00050000 | 13  # SECCOMP_RET_ALLOW, SECCOMP_RET_ERRNO | EACCES
+    prog = [(ld, 0, 0, 4), (jeq, 1, 0, arch), (ret, 0, 0, deny), (ld, 0, 0, 0)]  # arch, then the call number
+    # one test per socket number: on a match go to the domain test after them, else to the next one
+    for i, nr in enumerate(numbers):
+        left = len(numbers) - 1 - i
+        prog.append((jeq, left, 0 if left else 3, nr))
+    prog += [(ld, 0, 0, 16), (jeq, 2, 0, 2), (jeq, 1, 0, 10), (ret, 0, 0, allow), (ret, 0, 0, deny)]  # AF_INET(6)
+    return prog
+
+
+def _seccomp_no_inet() -> str:
+    """Refuse IPv4/IPv6 sockets in this process and its children; returns what was applied ("" if nothing)."""
+    import platform
+
+    prog = _network_filter_program(platform.machine())
+    if prog is None or not sys.platform.startswith("linux"):
+        return ""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        filters = (_SockFilter * len(prog))(*[_SockFilter(*ins) for ins in prog])
+        fprog = _SockFprog(len(prog), filters)
+        if libc.prctl(38, 1, 0, 0, 0) != 0:  # PR_SET_NO_NEW_PRIVS (Landlock may have set it already)
+            return ""
+        if libc.prctl(22, 2, ctypes.byref(fprog), 0, 0) != 0:  # PR_SET_SECCOMP, SECCOMP_MODE_FILTER
+            return ""
+    except (OSError, AttributeError):
+        return ""
+    return "no IPv4/IPv6 sockets"
+
+
 # --------------------------------------------------------------------------- JSON helpers
 def _json_value(v):
     import numpy as np
@@ -143,6 +200,8 @@ class _Child:
         sandbox = _landlock(p["readable"] + ["/usr", "/lib", "/lib64", "/etc", "/proc", "/sys", "/dev/urandom",
                                              "/dev/null", "/dev/zero"],
                             [p["scratch"], "/dev/null", *_SHARED_MEMORY], p.get("listable", []))
+        network = _seccomp_no_inet()
+        sandbox += f"; {network}" if network else "; IPv4/IPv6 sockets not filtered (no seccomp here)"
         method = p["method"]
         if isinstance(method, str):  # shared params its constructor takes are passed to it
             self.method = load_method(method, p["params"], p["shared_params"])
