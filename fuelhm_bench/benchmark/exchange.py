@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 from pathlib import Path
 from typing import Any, Callable
 
@@ -22,15 +21,15 @@ import pandas as pd
 from fuelhm_bench.errors import DataFormatError, ParameterError, show_value
 from fuelhm_bench.methods.tables import DECISION_COLUMNS, GUILT_COLUMNS
 from fuelhm_bench.scoring.run import LABEL_COLUMNS, UNKNOWN_ONSET_COLUMN
-
-#: Columns of the exported labels, at either fidelity: the seven modes' truth, then the fault outside them
-#: (``unknown_fault``, its effect id or ""; ``onset_unknown``, its onset flight or -1).
-EXPORT_LABEL_COLUMNS = (*LABEL_COLUMNS, "unknown_fault", UNKNOWN_ONSET_COLUMN)
 from fuelhm_bench.taxonomy import MODE_IDS
 
 __all__ = ["DECISION_FILE_COLUMNS", "EXPORT_LABEL_COLUMNS", "EXPORT_MANIFEST", "FILE_GUILT_SUM_TOLERANCE",
            "ScenarioTables", "check_calibration", "check_fingerprint", "check_flights", "export_scenario",
            "read_decisions", "scenario_tables", "score_decisions"]
+
+#: Columns of the exported labels, at either fidelity: the seven modes' truth, then the fault outside them
+#: (``unknown_fault``, its effect id or ""; ``onset_unknown``, its onset flight or -1).
+EXPORT_LABEL_COLUMNS = (*LABEL_COLUMNS, "unknown_fault", UNKNOWN_ONSET_COLUMN)
 
 #: Required columns of a decisions file (``guilt_<mode>`` are optional: zeros when absent).
 DECISION_FILE_COLUMNS: tuple[str, ...] = ("split", "unit_id", "flight_index", "score", "alarm")
@@ -143,7 +142,9 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
     from fuelhm_bench.datasets.cache import resolve_scenario, scored_indicators, training_indicators
     from fuelhm_bench.flights.fleet import build_units
     from fuelhm_bench.flights.scale import scaled_unit_count
+    from fuelhm_bench.benchmark.harness import check_training_indicators, scenario_label
     from fuelhm_bench.benchmark.harness import split_training as _split_training
+    from fuelhm_bench.envs import KnowledgeSize
 
     sc = resolve_scenario(scenario)
     if seed is not None:
@@ -155,13 +156,9 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
                              f"'surrogate' or None. Got {fidelity!r} instead.")
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress}
     table = training_indicators(sc, **common)
-    from fuelhm_bench.benchmark.harness import check_training_indicators
-    from fuelhm_bench.envs import KnowledgeSize
-
     size = KnowledgeSize.coerce(knowledge_size, "scenario_tables")  # (the same rule as evaluate's)
-    label = f"{scenario} ({sc.id})" if isinstance(scenario, (str, os.PathLike)) else f"scenario {sc.id}"
-    check_training_indicators(table, label, fidelity=fidelity, knowledge_flights=size.healthy_units * size.healthy_flights,
-                              flight_minutes=flight_minutes)
+    check_training_indicators(table, scenario_label(scenario, sc), fidelity=fidelity,
+                              knowledge_flights=size.healthy_units * size.healthy_flights, flight_minutes=flight_minutes)
     fit_part, cal_part = _split_training(table)
     training = pd.concat([fit_part.assign(split="fit"), cal_part.assign(split="calibration")],
                          ignore_index=True)

@@ -285,7 +285,7 @@ def prepare_evaluation(scenario, *, fidelity: str | None = None, seed: int | Non
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress, "workers": workers}
     from fuelhm_bench.flights.scale import scaled_unit_count  # every mode of the fleet stays represented
     n_units = scaled_unit_count(sc.test_fleet_config(), scale)
-    label = f"{scenario} ({sc.id})" if isinstance(scenario, (str, os.PathLike)) else f"scenario {sc.id}"
+    label = scenario_label(scenario, sc)
     knowledge, training = _build_products(sc, fidelity, size, n_units, robustness and bool(sc.drift), common,
                                           label=label, flight_minutes=flight_minutes)
     fit_part, cal_part = split_training(training)
@@ -349,6 +349,11 @@ def _build_products(sc, fidelity, size, n_units: int, both: bool, common: dict, 
             calls.append(lambda d=drifted: surrogate_doe(sc, size=size, drifted=d, **common))
     training_table, knowledge = run_concurrently(calls, workers=common["workers"])[:2]
     return knowledge, training_table
+
+
+def scenario_label(scenario, sc) -> str:
+    """How messages name a scenario given as ``scenario`` and loaded as ``sc``: its file and id, or its id."""
+    return f"{scenario} ({sc.id})" if isinstance(scenario, (str, os.PathLike)) else f"scenario {sc.id}"
 
 
 #: The indicator settings of a scenario: what a message about too few valid indicators points at.

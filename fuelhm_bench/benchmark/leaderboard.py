@@ -430,6 +430,7 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
     log : callable
         Receives one line per finished evaluation.
     """
+    from fuelhm_bench.benchmark.harness import earlier_outputs
     from fuelhm_bench.benchmark.store import ResultStore, default_store_path
     from fuelhm_bench.benchmark.views import write_views
 
@@ -442,8 +443,6 @@ def run_board(config: LeaderboardConfig, out, *, store_path=None, shared_params:
               "the folder of the results store (--store)": store_path.resolve().parent}
     if cache_dir not in (None, False):
         hidden["the simulation cache (--cache-dir)"] = Path(cache_dir).resolve()
-    from fuelhm_bench.benchmark.harness import earlier_outputs
-
     for folder in earlier_outputs(Path.cwd()):  # hidden by run_in_env: a module inside one is refused now
         hidden.setdefault(f"an earlier fuelhm-bench output folder in the working directory ({folder.name})", folder)
     _check_modules_visible(config, hidden)
