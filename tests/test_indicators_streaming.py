@@ -200,3 +200,32 @@ def test_streaming_end_of_flight_checks():
     const.update(np.arange(100) * 0.01, np.full(100, 0.7), np.full(100, 30.0))
     with pytest.raises(DataFormatError, match="flight 4: 'current_ma' is constant"):
         const.result()
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_window_masks_at_chunk_edges_agree_with_the_numpy_engine(seed):
+    """Gaps, end stops and current limits right at chunk edges: the compiled kernel tracks the
+    last sample that trips each mask as it enters the window; the vectorised numpy engine tests
+    every window whole. Both, and streaming in chunks cut next to the trips, give the same sums."""
+    f = synthetic_flight(n_excursions=60, saturation_events=4, seed=20 + seed)
+    rng = np.random.default_rng(seed)
+    n = len(f.time_s)
+    t = f.time_s.copy()
+    holes = np.sort(rng.choice(np.arange(10, n - 10), size=12, replace=False))
+    for k in holes:  # a hole before sample k (0.05 to 1 s): 2h windows see it
+        t[k:] += rng.uniform(0.05, 1.0)
+    flight = (t, f.current_ma, f.position_mm)
+    numpy_curve = velocity_gain_curve(*flight, engine="numpy")
+    numba_curve = velocity_gain_curve(*flight)
+    np.testing.assert_array_equal(numba_curve.counters, numpy_curve.counters)
+    np.testing.assert_array_equal(numba_curve.accumulators, numpy_curve.accumulators)
+    for name in ("n_gap", "n_end_stop", "n_current_limit"):
+        assert numpy_curve.counter(name) > 0, name
+    # Chunks cut at, just before and just after each hole and at random places.
+    cuts = sorted({0, n, *holes.tolist(), *(holes - 1).tolist(), *(holes + 2).tolist(),
+                   *rng.integers(1, n, 40).tolist()})
+    stream = StreamingExtractor()
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        stream.update(t[a:b], f.current_ma[a:b], f.position_mm[a:b])
+    np.testing.assert_array_equal(stream.curve().counters, numpy_curve.counters)
+    np.testing.assert_allclose(stream.curve().accumulators, numpy_curve.accumulators, rtol=RTOL, atol=0)
