@@ -80,3 +80,30 @@ def _peak_bytes(n_flights: int) -> int:
 def test_fleet_streaming_memory_does_not_grow_with_flights():
     small, large = _peak_bytes(2), _peak_bytes(8)
     assert large < 1.25 * small, (small, large)
+
+
+def test_leaving_out_the_fuel_temperature_changes_no_other_bit():
+    """``fuel_temperature=False`` (the indicator builds) skips the temperature channel only: the
+    other channels and the simulated signals are the same bytes, and a model that reads the
+    temperature (viscosity_temperature) still gets it."""
+    from fuelhm_bench.physics.model import LoopModel
+
+    def flights(fuel_temperature, nominal=None):
+        config = FleetConfig(n_units=2, n_flights=2, mission=SHORT, seed=11,
+                             **({} if nominal is None else {"nominal": nominal}))
+        return [f for b in iter_flights(config, fuel_temperature=fuel_temperature) for f in b]
+
+    full, lean = flights(True), flights(False)
+    for a, b in zip(full, lean, strict=True):
+        assert "fuel_temp_degC" in a.inputs.extras and "fuel_temp_degC" not in b.inputs.extras
+        for name in ("n2_pct", "phase", "demand_mm"):
+            assert a.inputs.extras[name].tobytes() == b.inputs.extras[name].tobytes(), name
+        assert a.inputs.demand_m.tobytes() == b.inputs.demand_m.tobytes()
+        assert a.inputs.n2_frac.tobytes() == b.inputs.n2_frac.tobytes()
+        for name in ("current_a", "measured_position_m", "true_position_m"):
+            assert getattr(a.output, name).tobytes() == getattr(b.output, name).tobytes(), name
+    viscous = LoopModel().with_effect("viscosity_temperature")
+    full, lean = flights(True, viscous), flights(False, viscous)
+    for a, b in zip(full, lean, strict=True):
+        assert a.inputs.extras["fuel_temp_degC"].tobytes() == b.inputs.extras["fuel_temp_degC"].tobytes()
+        assert a.output.measured_position_m.tobytes() == b.output.measured_position_m.tobytes()

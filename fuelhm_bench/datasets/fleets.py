@@ -64,7 +64,7 @@ def _fleet_part(config: FleetConfig, start: int, stop: int, batch_size: int,
     hidden = ",".join(e.id for e in config.nominal.effects)
     ind_parts, lab_parts = [], []
     units = {u: _build_unit(config, u) for u in range(start // config.n_flights, (stop - 1) // config.n_flights + 1)}
-    for batch in iter_flights(config, batch_size=batch_size, start=start, stop=stop):
+    for batch in iter_flights(config, batch_size=batch_size, start=start, stop=stop, fuel_temperature=False):
         table = extract_table([f.as_flight_arrays() for f in batch], extraction, on_error="flag")
         table.insert(2, "flight_index", [f.flight_index for f in batch])
         ind_parts.append(table)

@@ -148,7 +148,8 @@ def _build_unit(config: FleetConfig, u: int) -> Unit:
 
 
 def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None, start: int = 0,
-                 stop: int | None = None, units=None) -> Iterator[list[SimulatedFlight]]:
+                 stop: int | None = None, units=None, fuel_temperature: bool = True
+                 ) -> Iterator[list[SimulatedFlight]]:
     """Simulate the fleet in batches of flights (bounded memory).
 
     Parameters
@@ -166,6 +167,10 @@ def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None, st
         Simulate only these units of the fleet (the same flights, bit for bit,
         as in the whole fleet: every draw is seeded per unit and flight), within
         ``start .. stop - 1``; None: all.
+    fuel_temperature : bool, default=True
+        False: leave the ``fuel_temp_degC`` channel out of the flights' inputs, except for a
+        model that reads it (``viscosity_temperature``); every other channel and the outputs are
+        the same, bit for bit (see :meth:`~fuelhm_bench.flights.mission.MissionProfile.sample`).
 
     Yields
     ------
@@ -196,7 +201,9 @@ def iter_flights(config: FleetConfig, *, batch_size: int = 16, progress=None, st
             for effect in unit.schedule.effects(f):  # a fault outside the seven modes
                 model = model.with_effect(effect)
             models.append(model)
-            inputs.append(config.mission.sample(mission_rng(config.seed, unit.unit_id, f)))
+            temperature = fuel_temperature or model.effect("viscosity_temperature") is not None
+            inputs.append(config.mission.sample(mission_rng(config.seed, unit.unit_id, f),
+                                                fuel_temperature=temperature))
             rngs.append(noise_rng(config.seed, unit.unit_id, f))
             labels.append(f"unit {unit.unit_id}, flight {f}")
         outs = simulate(models, inputs, rngs, labels=labels)

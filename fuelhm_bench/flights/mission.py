@@ -246,19 +246,24 @@ class MissionProfile:
         out[: min(n_start, seq.size)] = seq[:n_start]
         return out
 
-    def sample(self, rng: np.random.Generator) -> FlightInputs:
+    def sample(self, rng: np.random.Generator, *, fuel_temperature: bool = True) -> FlightInputs:
         """Draw one flight's inputs.
 
         Parameters
         ----------
         rng : numpy.random.Generator
             Source of the operating variability.
+        fuel_temperature : bool, default=True
+            Compute the ``fuel_temp_degC`` channel. Its draws are made either way, so every
+            other channel is the same, bit for bit; False leaves it out for callers that keep
+            only the indicators of a model without ``viscosity_temperature`` (a flight-long
+            ``exp``: about a tenth of the sampling time).
 
         Returns
         -------
         FlightInputs
-            With extras ``n2_pct``, ``fuel_temp_degC``, ``phase`` (phase index into
-            :data:`PHASE_NAMES`) and ``demand_mm``.
+            With extras ``n2_pct``, ``fuel_temp_degC`` (unless ``fuel_temperature`` is False),
+            ``phase`` (phase index into :data:`PHASE_NAMES`) and ``demand_mm``.
         """
         T = self.frame_s
         n = self.n_frames
@@ -304,19 +309,17 @@ class MissionProfile:
             float(self.sweep_high_m - self.sweep_low_m), sweep)
         temp0 = self.fuel_temp_start_degc + rng.normal(0.0, 8.0)
         temp1 = self.fuel_temp_end_degc + rng.normal(0.0, 8.0)
-        tau = 0.3 * self.duration_s
-        # temp1 + (temp0 - temp1) * exp(-t / tau) with t = k T, in one buffer (same operations, same bits).
-        fuel_temp = np.arange(n, dtype=np.float64)  # exact integers, as np.arange(n) converted for the product
-        np.multiply(fuel_temp, T, out=fuel_temp)
-        np.negative(fuel_temp, out=fuel_temp)
-        np.divide(fuel_temp, tau, out=fuel_temp)
-        np.exp(fuel_temp, out=fuel_temp)
-        np.multiply(fuel_temp, temp0 - temp1, out=fuel_temp)
-        np.add(fuel_temp, temp1, out=fuel_temp)
-        extras = {
-            "n2_pct": n2_pct,
-            "fuel_temp_degC": fuel_temp,
-            "phase": phase,
-            "demand_mm": demand_mm,
-        }
+        extras = {"n2_pct": n2_pct}
+        if fuel_temperature:
+            tau = 0.3 * self.duration_s
+            # temp1 + (temp0 - temp1) * exp(-t / tau) with t = k T, in one buffer (same operations, same bits).
+            fuel_temp = np.arange(n, dtype=np.float64)  # exact integers, as np.arange(n) converted for the product
+            np.multiply(fuel_temp, T, out=fuel_temp)
+            np.negative(fuel_temp, out=fuel_temp)
+            np.divide(fuel_temp, tau, out=fuel_temp)
+            np.exp(fuel_temp, out=fuel_temp)
+            np.multiply(fuel_temp, temp0 - temp1, out=fuel_temp)
+            np.add(fuel_temp, temp1, out=fuel_temp)
+            extras["fuel_temp_degC"] = fuel_temp
+        extras.update(phase=phase, demand_mm=demand_mm)
         return FlightInputs(demand, n2, T, extras=extras)
