@@ -424,6 +424,8 @@ def plot_fidelity(report: FidelityReport, path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from fuelhm_bench.scoring.figures import apply_tight_layout
+
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
     m = report.methods
     a, b = report.labels
@@ -453,7 +455,7 @@ def plot_fidelity(report: FidelityReport, path) -> Path:
     ax2.set_ylabel(f"FCR, {b} - {a}")
     ax2.set_title("false classification rate per mode")
     ax2.tick_params(axis="x", labelrotation=30, labelsize=7)
-    fig.tight_layout()
+    apply_tight_layout(fig)
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)

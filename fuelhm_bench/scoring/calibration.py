@@ -131,12 +131,14 @@ def plot_reliability(tables: dict[str, pd.DataFrame], path=None):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    from fuelhm_bench.scoring.figures import apply_tight_layout
 
-    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    fig = Figure(figsize=(4.5, 4.5))  # the object API: no pyplot state, no display
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
     ax.plot([0, 1], [0, 1], color="grey", linestyle="--", label="calibrated")
     for name, t in tables.items():
         ok = t["count"] > 0
@@ -147,7 +149,7 @@ def plot_reliability(tables: dict[str, pd.DataFrame], path=None):
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1)
     ax.legend(fontsize="small")
-    fig.tight_layout()
+    apply_tight_layout(fig)
     if path is not None:
         fig.savefig(path)
     return fig

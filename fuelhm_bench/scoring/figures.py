@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -17,7 +18,7 @@ from fuelhm_bench.scoring.detection import modes_present
 from fuelhm_bench.scoring.run import HEALTHY, Run, flight_table
 from fuelhm_bench.scoring.thresholds import fit_healthy_model
 
-__all__ = ["plot_score_distributions", "save_figure"]
+__all__ = ["apply_tight_layout", "plot_score_distributions", "save_figure"]
 
 
 def plot_score_distributions(run: Run, config: ScoringConfig | None = None, *, bins: int = 40,
@@ -85,8 +86,25 @@ def plot_score_distributions(run: Run, config: ScoringConfig | None = None, *, b
     ax.set_title(f"{run.name}\nglobal-score distributions, Thr = mu + A sigma "
                  f"(mu={model.mu:.3g}, sigma={model.sigma:.3g})", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
+    apply_tight_layout(fig)
     return fig
+
+
+def apply_tight_layout(fig: Figure) -> None:
+    """``fig.tight_layout()``, applied once, leaving the figure without a layout engine.
+
+    After ``Figure.tight_layout`` matplotlib keeps a placeholder layout engine, and ``savefig``
+    then draws the whole figure once more before drawing it into the file: about a third of
+    the time a report figure takes to save. The layout is fixed once applied, so the
+    placeholder is dropped (the rc settings that would pick another engine are held off).
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    """
+    fig.tight_layout()
+    with matplotlib.rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
+        fig.set_layout_engine(None)
 
 
 def save_figure(fig: Figure, path: str | Path, *, dpi: int = 120, close: bool = False) -> Path:
