@@ -62,14 +62,25 @@ def detection_delays(flights: pd.DataFrame, config: ScoringConfig | None = None)
     """
     config = ScoringConfig() if config is None else config
     rows = []
-    for unit_id, unit in flights.groupby("unit_id", sort=False):
-        idx = unit["flight_index"].to_numpy()
-        alarm = unit["alarm"].to_numpy(dtype=bool)
+    # The columns read once as arrays, each unit's rows in flight-table order (the unit order of
+    # groupby(sort=False): first appearance); column lookups per unit and mode cost more than the rest.
+    unit_ids = flights["unit_id"].to_numpy()
+    codes, uniques = pd.factorize(unit_ids, sort=False)  # code -1: a missing unit id, left out as groupby does
+    order = np.argsort(codes, kind="stable")
+    order = order[codes[order] >= 0]
+    rows_of = np.split(order, np.cumsum(np.bincount(codes[codes >= 0], minlength=len(uniques)))[:-1])
+    index_all = flights["flight_index"].to_numpy()
+    alarm_all = flights["alarm"].to_numpy(dtype=bool)
+    fraction_all = {mode: flights[f"fraction_{mode}"].to_numpy(dtype=float) for mode in MODE_IDS}
+    onset_all = {mode: flights[f"onset_{mode}"].to_numpy() for mode in MODE_IDS}
+    for unit_id, at in zip(uniques, rows_of):
+        idx = index_all[at]
+        alarm = alarm_all[at]
         for mode in MODE_IDS:
-            frac = unit[f"fraction_{mode}"].to_numpy(dtype=float)
+            frac = fraction_all[mode][at]
             if not np.any(frac > 0):
                 continue
-            onset = int(unit[f"onset_{mode}"].iloc[0])
+            onset = int(onset_all[mode][at[0]])
             after = idx >= onset
             det_at = idx[after & (frac >= config.detectable_fraction) & (frac > 0)]
             alarm_at = idx[after & alarm]
