@@ -260,3 +260,15 @@ class Spy(IdleCurrent):
         if self.found_:
             return Decision(score=float(len(self.found_)), alarm=True, guilt=np.eye(7)[0])
         return Decision(score=0.0, alarm=False)
+
+
+class EchoesRow(IdleCurrent):
+    """Scores a flight by what its row holds: ``score = I0 + 1000 * flight_index``, and alarms when the
+    row's labels are not the observation columns (so a test sees what arrived in the sealed process)."""
+
+    def _decide(self, row):
+        from fuelhm_bench.taxonomy import OBSERVATION_COLUMNS
+
+        odd = tuple(row.index) != OBSERVATION_COLUMNS
+        return Decision(score=float(row["I0"]) + 1000.0 * float(row["flight_index"]), alarm=odd,
+                        guilt=np.full(7, 1 / 7) if odd else np.zeros(7))

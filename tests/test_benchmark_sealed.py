@@ -6,6 +6,7 @@ import os
 import time
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from fuelhm_bench.benchmark.harness import prepare_evaluation, run_in_env
@@ -339,3 +340,40 @@ def test_a_denied_file_access_says_what_the_sandbox_allows(evaluation, tmp_path,
     assert outcome.status == "error"
     assert "PermissionError" in outcome.message and "write only its scratch directory" in outcome.message
     assert not (project / "cache.bin").exists()
+
+
+def test_row_labels_travel_once_and_every_row_arrives_whole(evaluation, monkeypatch):
+    """decide_values sends the row labels with the first row and again only when they change;
+    the sealed process rebuilds each Series with the right labels and values."""
+    from submissions import EchoesRow
+
+    from fuelhm_bench.taxonomy import OBSERVATION_COLUMNS
+
+    sent = []
+    with SealedMethod(EchoesRow(), limits={"wall_s": 60.0}) as m:
+        m.fit(evaluation.fit_indicators)
+        rows = evaluation.calibration_indicators[list(OBSERVATION_COLUMNS)]
+        rows = rows[rows["unit_id"] == rows["unit_id"].iloc[0]].head(3)
+        m.start_unit(rows["unit_id"].iloc[0])
+        original = m._send
+        monkeypatch.setattr(m, "_send", lambda op, payload, phase: (sent.append((op, dict(payload))),
+                                                                     original(op, payload, phase))[1])
+        labels = tuple(OBSERVATION_COLUMNS)
+        at = OBSERVATION_COLUMNS.index("flight_index")
+
+        def values(i, f):  # row i of the table, as flight f
+            v = rows.iloc[i].tolist()
+            v[at] = f
+            return v
+
+        for f in range(3):
+            d = m.decide_values(labels, values(f, f))
+            assert not d.alarm and d.score == pytest.approx(float(rows.iloc[f]["I0"]) + 1000.0 * f)
+        # a Series with other labels (reversed) in between, then the first labels again
+        other = pd.Series(values(0, 3), index=list(OBSERVATION_COLUMNS), dtype=object)[list(reversed(OBSERVATION_COLUMNS))]
+        d = m.decide(other)
+        assert d.alarm and d.score == pytest.approx(float(rows.iloc[0]["I0"]) + 3000.0)
+        d = m.decide_values(labels, values(1, 4))
+        assert not d.alarm and d.score == pytest.approx(float(rows.iloc[1]["I0"]) + 4000.0)
+    with_labels = [p for op, p in sent if op == "decide" and "row_index" in p]
+    assert [op for op, _ in sent] == ["decide"] * 5 and len(with_labels) == 3  # first, other, first again

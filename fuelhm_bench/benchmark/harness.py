@@ -64,6 +64,7 @@ __all__ = ["EnvEvaluation", "Outcome", "action_from_decision", "check_training_i
            "earlier_outputs", "observation_row", "prepare_evaluation", "run_in_env", "split_training"]
 
 _ROW_INDEX = pd.Index(OBSERVATION_COLUMNS)
+_ROW_LABELS = tuple(OBSERVATION_COLUMNS)  # one object: the sealed process receives the labels once
 
 
 # --------------------------------------------------------------------------- the adapter
@@ -92,6 +93,13 @@ def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_i
         ``EXTENDED_INDICATOR_UNITS``; NaN when invalid) and their ``<name>_valid``: the columns
         of an indicator table.
     """
+    return pd.Series(_observation_values(observation, unit_id, flight_index, flight_id), index=_ROW_INDEX,
+                     dtype=object)
+
+
+def _observation_values(observation: dict, unit_id: Any, flight_index: int, flight_id: Any = None) -> list:
+    """The values of :func:`observation_row`, in the order of ``OBSERVATION_COLUMNS`` (``_ROW_LABELS``):
+    the harness sends them as they are, and the sealed process builds the Series the method sees."""
     values = np.asarray(observation["indicators"], dtype=np.float64)
     valid = np.asarray(observation["valid"]).astype(bool)
     if "extended" in observation:
@@ -103,7 +111,7 @@ def observation_row(observation: dict, unit_id: Any, flight_index: int, flight_i
     data = [flight_index if flight_id is None else flight_id, unit_id, int(flight_index),
             *np.where(valid, values, np.nan).tolist(), *valid.tolist(),
             *np.where(ext_valid, ext, np.nan).tolist(), *ext_valid.tolist()]
-    return pd.Series(data, index=_ROW_INDEX, dtype=object)
+    return data
 
 
 def action_from_decision(decision) -> dict:
@@ -670,12 +678,12 @@ def _episodes(sealed, evaluation: EnvEvaluation, progress, raw: bool = False
         sealed.start_unit(k)
         total, terminated = 0.0, False
         for f in range(n):
-            row = observation_row(obs, k, f, k * n + f)
+            values = _observation_values(obs, k, f, k * n + f)
             flight = None
             if raw:
                 flight = _env_call(raw_flight_from_info, info["raw_flight"], k, f)
                 info = None  # the flight is now held once, by ``flight``
-            decision = sealed.decide(row, raw=flight, where=f"decide (unit {k}, flight {f})")
+            decision = sealed.decide_values(_ROW_LABELS, values, raw=flight, where=f"decide (unit {k}, flight {f})")
             flight = None
             unit_col.append(k)
             flight_col.append(f)

@@ -176,6 +176,7 @@ class _Child:
         self.conn = conn
         self.method = None
         self._index = {}
+        self._row_index = None  # the labels of the rows (op_decide)
 
     def reply(self, **data) -> None:
         data.setdefault("status", "ok")
@@ -261,10 +262,12 @@ class _Child:
         if "row_values" in p:
             import pandas as pd
 
-            index = self._index.get(p["row_index"])
-            if index is None:
-                index = self._index[p["row_index"]] = pd.Index(p["row_index"])
-            row = pd.Series(p["row_values"], index=index, dtype=object)
+            if "row_index" in p:  # sent when it changes (SealedMethod.decide_values), kept until then
+                index = self._index.get(p["row_index"])
+                if index is None:
+                    index = self._index[p["row_index"]] = pd.Index(p["row_index"])
+                self._row_index = index
+            row = pd.Series(p["row_values"], index=self._row_index, dtype=object)
         else:
             row = p["row"]
         if "raw" in p:

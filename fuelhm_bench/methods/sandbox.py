@@ -561,6 +561,7 @@ class SealedMethod:
         self._scratch = None
         self._deadline = math.inf
         self._row_index = (None, ())  # (the last row's Index, its labels as a tuple): one conversion per table
+        self._labels_sent = None  # the row labels the sealed process holds (decide_values)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> dict:
@@ -582,6 +583,7 @@ class SealedMethod:
                 pass_fds=(child_sock.fileno(),), start_new_session=True, close_fds=True)
         child_sock.close()
         self._conn = Connection(parent_sock.detach())
+        self._labels_sent = None
         self._pump = _LogPump(self._proc.stdout, self.log_path, int(self.limits.log_kb * 1024))
         self._pump.start()
         readable = list(_python_roots())
@@ -704,14 +706,28 @@ class SealedMethod:
         ``raw``: the flight's :class:`~fuelhm_bench.methods.raw.RawFlight`, for a method with
         ``needs_raw`` (sent as binary float64 buffers).
         """
-        from fuelhm_bench.methods.decision import Decision, decision_problem
-
         if hasattr(row, "index") and hasattr(row, "tolist"):  # a Series travels as plain tuples (cheap to pickle)
             if row.index is not self._row_index[0]:  # rows of one table share their Index; a str Index iterates slowly
                 self._row_index = (row.index, tuple(row.index))
-            payload = {"row_index": self._row_index[1], "row_values": tuple(row.tolist())}
-        else:
-            payload = {"row": row}
+            return self.decide_values(self._row_index[1], row.tolist(), raw=raw, where=where)
+        return self._decide({"row": row}, raw, where)
+
+    def decide_values(self, labels: tuple, values, *, raw=None, where: str = "decide"):
+        """``method.decide(pandas.Series(values, index=labels, dtype=object))``, the Series built in
+        the sealed process; returns a validated :class:`~fuelhm_bench.methods.Decision`.
+
+        The labels travel only when they are not the tuple sent last (compared by identity: pass one
+        tuple object for every row of a table), so a row costs its values alone.
+        """
+        payload = {"row_values": tuple(values)}
+        if labels is not self._labels_sent:
+            payload["row_index"] = labels
+            self._labels_sent = labels
+        return self._decide(payload, raw, where)
+
+    def _decide(self, payload: dict, raw, where: str):
+        from fuelhm_bench.methods.decision import Decision, decision_problem
+
         if raw is not None:
             payload["raw"] = _raw_payload(raw)
         reply = self._call("decide", payload, phase=where)
