@@ -270,7 +270,7 @@ def _indicator_table(n: int, valid: dict, reason: str = "") -> pd.DataFrame:
 def test_check_training_indicators_rule():
     """Each of the paper's ten valid in >= 11 / knowledge_flights of the training flights; at the surrogate
     fidelity every extended indicator valid somewhere."""
-    from fuelhm_bench.benchmark.harness import check_training_indicators
+    from fuelhm_bench.datasets.checks import check_training_indicators
     from fuelhm_bench.errors import ScenarioError
 
     def check(table, fidelity="physics", knowledge_flights=40):
@@ -311,3 +311,17 @@ def test_a_scenario_without_test_sweep_is_refused_with_its_file_and_fields(tmp_p
 
     with pytest.raises(ScenarioError, match=r"no_sweep-v3\): too few valid indicators in its 24 healthy training"):
         scenario_tables(path, fidelity=fidelity, knowledge_size=SMALL, cache_dir=cache_dir)
+    # the environment on its own (gym.make): at the surrogate fidelity it learns from healthy flights of its own
+    # and from the published knowledge, and each build refuses them the same way, naming the file
+    import gymnasium as gym
+
+    from fuelhm_bench.datasets.cache import published_knowledge
+
+    with pytest.raises(ScenarioError, match=rf"{path} \(no_sweep-v3\): too few valid indicators in its \d+ healthy "
+                                            r"flights of its published knowledge.*mission.test_sweep") as info:
+        published_knowledge(path, size=SMALL, cache_dir=cache_dir)
+    assert "HealthyModel" not in str(info.value)
+    if fidelity == "surrogate":
+        with pytest.raises(ScenarioError, match=r"no_sweep-v3\): too few valid indicators in its \d+ healthy flights"):
+            gym.make("FuelHM/ActuationLoop-v3", scenario=path, fidelity="surrogate", knowledge_size=SMALL,
+                     cache_dir=cache_dir)

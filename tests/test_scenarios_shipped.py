@@ -175,7 +175,7 @@ def test_shipped_training_flights_pass_the_indicator_check(name, minutes):
     (``check_training_indicators``); every shipped one has all ten valid in every training flight (measured
     2026-11-25: 400-800 flights, 24 for low_data, at the scenario's length and at 2 minutes) and every
     extended indicator somewhere, so the check is far from refusing any."""
-    from fuelhm_bench.benchmark.harness import check_training_indicators
+    from fuelhm_bench.datasets.checks import check_training_indicators
     from fuelhm_bench.datasets.cache import training_indicators
     from fuelhm_bench.taxonomy import EXTENDED_INDICATOR_NAMES, INDICATOR_NAMES
 

@@ -142,7 +142,7 @@ def scenario_tables(scenario, *, fidelity: str | None = None, seed: int | None =
     from fuelhm_bench.datasets.cache import resolve_scenario, scored_indicators, training_indicators
     from fuelhm_bench.flights.fleet import build_units
     from fuelhm_bench.flights.scale import scaled_unit_count
-    from fuelhm_bench.benchmark.harness import check_training_indicators, scenario_label
+    from fuelhm_bench.datasets.checks import check_training_indicators, scenario_label
     from fuelhm_bench.benchmark.harness import split_training as _split_training
     from fuelhm_bench.envs import KnowledgeSize
 

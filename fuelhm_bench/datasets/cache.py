@@ -519,6 +519,7 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     KnowledgeResult
         The same tables and fitted numbers whichever cache answered.
     """
+    from fuelhm_bench.datasets.checks import scenario_label
     from fuelhm_bench.datasets.knowledge import build_knowledge
 
     sc = resolve_scenario(scenario)
@@ -532,7 +533,7 @@ def published_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     key = content_key("knowledge", build)  # scenarios with the same published model, mission and sensor share it
 
     def make() -> dict[str, pd.DataFrame]:
-        result = build_knowledge(build, progress=progress, workers=workers)
+        result = build_knowledge(build, progress=progress, workers=workers, label=scenario_label(scenario, sc))
         return {"healthy": result.healthy_table, "doe": result.doe_table}
 
     def finish(tables: dict[str, pd.DataFrame]):
@@ -778,6 +779,7 @@ def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     -------
     KnowledgeResult
     """
+    from fuelhm_bench.datasets.checks import check_training_indicators, scenario_label
     from fuelhm_bench.diagnosis.healthy import HealthyModel
     from fuelhm_bench.datasets.knowledge import KnowledgeResult
 
@@ -785,6 +787,9 @@ def surrogate_knowledge(scenario, *, flight_minutes: float | None = None, size: 
     common = {"flight_minutes": flight_minutes, "cache_dir": cache_dir, "progress": progress, "workers": workers}
     published = published_knowledge(scenario, size=size, **common)
     table = surrogate_healthy(scenario, size=size, drifted=drifted, **common)
+    check_training_indicators(table, scenario_label(scenario, resolve_scenario(scenario)), fidelity="surrogate",
+                              knowledge_flights=len(table), flight_minutes=flight_minutes,
+                              flights="healthy flights the surrogate learns from")
     doe = surrogate_doe(scenario, size=size, drifted=drifted, **common)
     return KnowledgeResult(published.itl, HealthyModel().fit(table), published.signatures,
                            dict(published.max_intensity), doe, table)

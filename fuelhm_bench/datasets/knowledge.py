@@ -117,16 +117,22 @@ class KnowledgeResult:
 
 
 def build_knowledge(build: KnowledgeBuild = KnowledgeBuild(), *, extraction=None,
-                    progress: Callable[[int], object] | None = None, workers: int = 1) -> KnowledgeResult:
+                    progress: Callable[[int], object] | None = None, workers: int = 1,
+                    label: str = "the published knowledge") -> KnowledgeResult:
     """Simulate the healthy fleet and the design of experiments; fit the healthy model, ITL and signatures.
 
     ``workers`` processes simulate in parallel (:mod:`fuelhm_bench.datasets.parallel`); the
-    result is byte-identical for any number.
+    result is byte-identical for any number. The healthy flights are checked first
+    (:func:`~fuelhm_bench.datasets.checks.check_training_indicators`, the scenario named by
+    ``label``): too few valid indicators for the healthy model is refused before the design is simulated.
     """
+    from fuelhm_bench.datasets.checks import check_training_indicators
     from fuelhm_bench.datasets.fleets import fleet_indicators
 
     healthy_table, _ = fleet_indicators(build.healthy_fleet, extraction=extraction, progress=progress,
                                         workers=workers)
+    check_training_indicators(healthy_table, label, fidelity="physics", knowledge_flights=len(healthy_table),
+                              flights="healthy flights of its published knowledge")
     doe_table = run_doe(build.doe, extraction=extraction, progress=progress, workers=workers)
     healthy_model = HealthyModel().fit(healthy_table)
     itl = fit_itl(doe_table)

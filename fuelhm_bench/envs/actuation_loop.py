@@ -417,7 +417,8 @@ class ActuationLoopEnv(gym.Env):
         self._fault_columns = None
         if fidelity == "surrogate":
             if knowledge is None:
-                knowledge = surrogate_knowledge(sc, flight_minutes=self.flight_minutes, size=size,
+                # (the scenario as given, so that a refusal names its file)
+                knowledge = surrogate_knowledge(scenario, flight_minutes=self.flight_minutes, size=size,
                                                 drifted=self.drifted, cache_dir=cache_dir)
             self.surrogate = SurrogateModel.from_knowledge(knowledge)
             missing = [n for n in INDICATOR_NAMES if n not in self.surrogate.names]
