@@ -218,3 +218,41 @@ def test_score_checks_the_export_it_was_given(exported, tmp_path, capsys):
     assert main(["score", str(path), "--scenario", str(scenario), "--minutes", "2",
                  "--exported", str(tmp_path)]) == 2
     assert f"--exported {tmp_path}: no export.json there" in capsys.readouterr().err
+
+
+def test_tables_digest_is_the_same_for_equal_tables_in_any_backend():
+    """export.json's table digest is a canonical form: equal tables digest alike whether their text is
+    object or Arrow-backed, their numbers NumPy or nullable, their NaNs of any bit pattern (an export
+    and a score made with different pandas versions agree), and any changed value changes it."""
+    import hashlib
+
+    from fuelhm_bench.benchmark.exchange import _digest_table
+
+    def digest(table):
+        h = hashlib.sha256()
+        _digest_table(h, table)
+        return h.hexdigest()
+
+    odd_nan = np.frombuffer(np.array([0x7FF8000000000001], dtype="<u8").tobytes(), dtype="<f8")[0]
+    base = pd.DataFrame({"unit_id": np.array([0, 0, 1], dtype=np.int64), "X1": [1.5, np.nan, -0.0],
+                         "X1_valid": [True, False, True], "quality_reason": ["", "X1: none", ""],
+                         "unknown_fault": ["", None, "rod_friction"]})
+    same = [
+        base.astype({"quality_reason": "string", "unknown_fault": "string"}),
+        base.astype({"unit_id": "Int64", "X1": "Float64", "X1_valid": "boolean"}),
+        base.assign(X1=[1.5, odd_nan, -0.0]),
+    ]
+    try:
+        same.append(base.astype({"quality_reason": "string[pyarrow]", "unknown_fault": "string[pyarrow]"}))
+    except (ImportError, TypeError):
+        pass
+    for other in same:
+        assert digest(other) == digest(base), other.dtypes.to_dict()
+    odd = base.assign(X1=[1.5, odd_nan, -0.0])
+    before = odd["X1"].to_numpy().tobytes()
+    digest(odd)
+    assert odd["X1"].to_numpy().tobytes() == before  # the table itself is not rewritten (its NaN kept)
+    changed = [base.assign(X1=[1.5, np.nan, 0.0]), base.assign(quality_reason=["", "X1: none ", ""]),
+               base.assign(unit_id=[0, 1, 1]), base.rename(columns={"X1": "Y1"}), base.iloc[:2],
+               base.assign(unknown_fault=["", "", "rod_friction"])]
+    assert len({digest(t) for t in changed} | {digest(base)}) == len(changed) + 1

@@ -78,10 +78,55 @@ class ScenarioTables:
 
         digest = hashlib.sha256()
         for table in (self.training, self.test, self.labels):
-            digest.update(pd.util.hash_pandas_object(table, index=False).to_numpy().tobytes())
+            _digest_table(digest, table)
         return {"scenario": self.scenario.id, "fidelity": self.fidelity, "seed": int(self.scenario.seeds.master),
                 "scored_units": int(self.scenario.fleet.units), "flight_minutes": float(self.flight_minutes),
-                "scenario_digest": recipe_digest(self.scenario)[:16], "tables_digest": digest.hexdigest()[:16]}
+                "scenario_digest": recipe_digest(self.scenario)[:16], "tables_digest": digest.hexdigest()[:16],
+                "digest_format": TABLES_DIGEST_FORMAT}
+
+
+#: Version of :func:`_digest_table`'s canonical form; an export written with another one is told apart by it.
+TABLES_DIGEST_FORMAT = 2
+
+
+def _digest_table(digest, table: pd.DataFrame) -> None:
+    """Feed ``digest`` with a canonical form of ``table``, the same for equal tables whatever the versions
+    of pandas and numpy and the backends of their columns (object or Arrow strings, NumPy or nullable
+    numbers), so that an export and a score made in different environments agree.
+
+    Shape, then per column its name and values: booleans and integers without missing values as
+    little-endian bytes, floats as little-endian float64 with one NaN pattern for every missing value,
+    anything else value by value (``b``/``i``/``f`` (hex)/``s`` tokens, a missing value as ``\\0``).
+    (``pandas.util.hash_pandas_object``, used before, hashes strings differently by backend.)
+    """
+    digest.update(f"{len(table)}x{len(table.columns)}".encode())
+    for name in table.columns:
+        column = table[name]
+        digest.update(b"\0column\0" + str(name).encode("utf-8", "surrogatepass") + b"\0")
+        kind = getattr(column.dtype, "kind", "O")
+        missing = bool(column.isna().any())
+        if kind == "b" and not missing:
+            digest.update(b"b" + column.to_numpy(dtype=np.uint8).tobytes())
+        elif kind in "iu" and not missing:
+            digest.update(b"i" + column.to_numpy(dtype="<i8").tobytes())
+        elif kind == "f":
+            values = column.to_numpy(dtype="<f8", na_value=np.nan)
+            digest.update(b"f" + np.where(np.isnan(values), np.nan, values).tobytes())  # (a copy: the table is untouched)
+        else:
+            digest.update(b"o" + "\x1f".join(map(_value_token, column.tolist())).encode("utf-8", "surrogatepass"))
+
+
+def _value_token(value) -> str:
+    """One value of a column of mixed or text values, in :func:`_digest_table`'s canonical form."""
+    if value is None or value is pd.NA or value is pd.NaT or (isinstance(value, (float, np.floating)) and value != value):
+        return "\0"
+    if isinstance(value, (bool, np.bool_)):
+        return "b1" if value else "b0"
+    if isinstance(value, (int, np.integer)):
+        return f"i{int(value)}"
+    if isinstance(value, (float, np.floating)):
+        return "f" + float(value).hex()
+    return f"s{value}"
 
 
 #: File of ``export``'s output folder holding :meth:`ScenarioTables.fingerprint` (JSON).
