@@ -272,3 +272,28 @@ class EchoesRow(IdleCurrent):
         odd = tuple(row.index) != OBSERVATION_COLUMNS
         return Decision(score=float(row["I0"]) + 1000.0 * float(row["flight_index"]), alarm=odd,
                         guilt=np.full(7, 1 / 7) if odd else np.zeros(7))
+
+
+class ReadsEnvirons:
+    """Reads every ``/proc/<pid>/environ`` it can, then fails in ``fit`` saying how many it read and how
+    many hold the marker ``FUELHM_TEST_SECRET`` (a token in the environment of an automated run)."""
+
+    def fit(self, table, *, knowledge=None, random_state=None, raw_flights=None):
+        readable = found = 0
+        for pid in os.listdir("/proc"):
+            if not pid.isdigit():
+                continue
+            try:
+                with open(f"/proc/{pid}/environ", "rb") as f:
+                    data = f.read()
+            except OSError:
+                continue
+            readable += 1
+            found += b"FUELHM_TEST_SECRET=" in data
+        raise RuntimeError(f"ENVIRONS readable {readable} secret {found}")
+
+    def start_unit(self, unit_id):
+        pass
+
+    def decide(self, row):
+        return Decision(score=0.0, alarm=False, guilt=np.zeros(7))

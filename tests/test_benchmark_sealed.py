@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import numpy as np
@@ -160,6 +161,7 @@ def test_a_reply_is_json_never_pickle(evaluation):
 _OUTSIDER = '''
 import multiprocessing.pool
 import os
+import sys
 
 import numpy as np
 from sklearn.ensemble import IsolationForest
@@ -377,3 +379,31 @@ def test_row_labels_travel_once_and_every_row_arrives_whole(evaluation, monkeypa
         assert not d.alarm and d.score == pytest.approx(float(rows.iloc[1]["I0"]) + 4000.0)
     with_labels = [p for op, p in sent if op == "decide" and "row_index" in p]
     assert [op for op, _ in sent] == ["decide"] * 5 and len(with_labels) == 3  # first, other, first again
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux /proc")
+def test_a_method_cannot_read_the_environment_of_the_harness(tmp_path):
+    """The harness's environment (an automated run's tokens) is out of a sealed method's reach: the
+    harness is not dumpable and the method has no capability (a harness run as root gave it
+    CAP_SYS_PTRACE). Before, a method read /proc/<harness>/environ and could print it to its log."""
+    import subprocess
+
+    tests = os.path.dirname(os.path.abspath(__file__))
+    code = ("import sys\n"
+            f"sys.path.insert(0, {tests!r})\n"
+            "import pandas as pd\n"
+            "from fuelhm_bench.methods.sandbox import SealedFailure, SealedMethod\n"
+            "from submissions import ReadsEnvirons\n"
+            "with SealedMethod(ReadsEnvirons(), limits={'wall_s': 60.0}) as m:\n"
+            "    try:\n"
+            "        m.fit(pd.DataFrame({'I0': [0.0]}))\n"
+            "    except SealedFailure as exc:\n"
+            "        print(exc)\n"
+            "    print('SANDBOX', m.sandbox)\n")
+    env = {**os.environ, "FUELHM_TEST_SECRET": "s3cr3t"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=180,
+                         cwd=tmp_path)
+    assert "ENVIRONS readable" in out.stdout, out.stdout + out.stderr
+    readable = int(out.stdout.split("ENVIRONS readable ")[1].split()[0])
+    assert readable >= 1  # its own (/proc/self), so the scan itself worked
+    assert "secret 0" in out.stdout, out.stdout

@@ -62,7 +62,13 @@ def _client(jobs: int, scheduler: str | None):
     with dask.config.set({f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENVIRONMENT.items()}):
         cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, silence_logs=40)
-    return Client(cluster), cluster
+    from fuelhm_bench.methods.sandbox import protect_process
+
+    client = Client(cluster)
+    protect_process()  # the client and scheduler, then every nanny and worker: sealed methods cannot read them
+    client.run(protect_process, nanny=True)
+    client.run(protect_process)
+    return client, cluster
 
 
 def run_distributed(todo, kwargs: dict, done, *, jobs: int = 2, scheduler: str | None = None) -> None:

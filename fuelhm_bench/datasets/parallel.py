@@ -146,11 +146,15 @@ def ensure_pool(workers: int) -> bool:
 
 
 def _worker_init() -> None:
-    """Workers ignore Ctrl-C: the parent handles it (one message, no partial output) and ends them."""
+    """Workers ignore Ctrl-C: the parent handles it (one message, no partial output) and ends them; like
+    the harness, they are not dumpable (sealed methods cannot read their environment or memory)."""
     import signal
+
+    from fuelhm_bench.methods.sandbox import protect_process
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     tune_allocator()
+    protect_process()
 
 
 def _terminate(workers: int) -> None:

@@ -143,6 +143,44 @@ def _seccomp_no_inet() -> str:
     return "no IPv4/IPv6 sockets"
 
 
+class _CapHeader(ctypes.Structure):
+    _fields_ = [("version", ctypes.c_uint32), ("pid", ctypes.c_int)]
+
+
+class _CapData(ctypes.Structure):
+    _fields_ = [("effective", ctypes.c_uint32), ("permitted", ctypes.c_uint32), ("inheritable", ctypes.c_uint32)]
+
+
+def _drop_capabilities() -> str:
+    """Drop every Linux capability of this process for good; returns what was done ("" if it had none).
+
+    A harness run as root gives its sealed process root's capabilities, and with ``CAP_SYS_PTRACE``
+    it could read ``/proc/<pid>/environ`` and the memory of the harness and of the user's other
+    processes (ptrace access needs no capability only towards a process whose capabilities are a
+    subset of the caller's). The securebits stop ``execve`` from granting them back to uid 0, the
+    bounding and ambient sets are emptied, then the effective, permitted and inheritable sets.
+    """
+    if not sys.platform.startswith("linux"):
+        return ""
+    try:
+        with open("/proc/self/status") as f:
+            had = next((int(line.split()[1], 16) for line in f if line.startswith("CapEff:")), 0)
+        if not had:
+            return ""
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(28, 0x3, 0, 0, 0)  # PR_SET_SECUREBITS, SECBIT_NOROOT | SECBIT_NOROOT_LOCKED
+        with open("/proc/sys/kernel/cap_last_cap") as f:
+            last = int(f.read())
+        for cap in range(last + 1):
+            libc.prctl(24, cap, 0, 0, 0)  # PR_CAPBSET_DROP
+        libc.prctl(47, 4, 0, 0, 0)  # PR_CAP_AMBIENT, PR_CAP_AMBIENT_CLEAR_ALL
+        if libc.capset(ctypes.byref(_CapHeader(0x20080522, 0)), (_CapData * 2)()) != 0:  # _LINUX_CAPABILITY_VERSION_3
+            return ""
+    except (OSError, AttributeError, ValueError, StopIteration):
+        return ""
+    return "no capabilities"
+
+
 # --------------------------------------------------------------------------- JSON helpers
 def _json_value(v):
     import numpy as np
@@ -203,6 +241,8 @@ class _Child:
                             [p["scratch"], "/dev/null", *_SHARED_MEMORY], p.get("listable", []))
         network = _seccomp_no_inet()
         sandbox += f"; {network}" if network else "; IPv4/IPv6 sockets not filtered (no seccomp here)"
+        dropped = _drop_capabilities()
+        sandbox += f"; {dropped}" if dropped else ""
         method = p["method"]
         if isinstance(method, str):  # shared params its constructor takes are passed to it
             self.method = load_method(method, p["params"], p["shared_params"])

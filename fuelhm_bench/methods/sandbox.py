@@ -497,6 +497,27 @@ def _zygote(env: dict) -> _Zygote | None:
         return z
 
 
+def protect_process() -> bool:
+    """Make this process unreadable to sealed methods: not dumpable (``prctl(PR_SET_DUMPABLE, 0)``).
+
+    A harness process holds the user's environment (tokens of an automated run, say) and the scored
+    fleet. A process of the same user may read another's ``/proc/<pid>/environ``, ``mem`` and
+    ``fd`` unless that one is not dumpable; a sealed method also has no capability left
+    (``_sealed_child``), which covers a harness run as root. Core dumps of this process are off
+    too. ``/proc/<pid>/cmdline`` and ``stat`` stay readable (they hold nothing secret: seeds
+    to hide are kept in the results store, docs/methods.md section 7). Idempotent; returns whether it
+    applied (Linux only).
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None, use_errno=True).prctl(4, 0, 0, 0, 0) == 0  # PR_SET_DUMPABLE
+    except (OSError, AttributeError):
+        return False
+
+
 def prestart_zygote() -> None:
     """Start this process's zygote now (it imports its modules while the caller builds data)."""
     _zygote(_sealed_env(tempfile.gettempdir(), _import_path()))
@@ -568,6 +589,7 @@ class SealedMethod:
         """Start the process, import and build the method; returns ``{"repr", "params", "sandbox"}``."""
         from multiprocessing.connection import Connection
 
+        protect_process()  # this process (the harness) holds what a method must not read
         self._scratch = tempfile.TemporaryDirectory(prefix="fuelhm-sealed-")
         scratch = self._scratch.name
         parent_sock, child_sock = socket.socketpair()
