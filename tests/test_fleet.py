@@ -107,3 +107,12 @@ def test_leaving_out_the_fuel_temperature_changes_no_other_bit():
     for a, b in zip(full, lean, strict=True):
         assert a.inputs.extras["fuel_temp_degC"].tobytes() == b.inputs.extras["fuel_temp_degC"].tobytes()
         assert a.output.measured_position_m.tobytes() == b.output.measured_position_m.tobytes()
+
+
+def test_recorded_n2_is_one_hundred_times_the_simulated_n2_bit_for_bit():
+    """as_flight_arrays hands on the mission's recorded ``n2_pct`` channel rather than multiplying again:
+    it must be exactly ``100 * n2_frac``, or the indicator tables would change."""
+    config = FleetConfig(n_units=1, n_flights=2, mission=SHORT, seed=5)
+    for flight in next(iter(iter_flights(config))):
+        recorded = flight.as_flight_arrays().extras["n2_pct"]
+        assert recorded.tobytes() == (100.0 * flight.inputs.n2_frac).tobytes()

@@ -127,9 +127,10 @@ class SimulatedFlight:
         as :class:`~fuelhm_bench.io.FlightArrays`."""
         from fuelhm_bench.io import FlightArrays
 
+        n2_pct = self.inputs.extras.get("n2_pct")  # the mission's recorded channel, 100 n2 (the same bits)
         return FlightArrays(self.flight_id, self.unit_id, self.output.time_s, self.output.current_a * 1e3,
                             self.output.measured_position_m * 1e3,
-                            extras={"n2_pct": 100.0 * self.inputs.n2_frac})
+                            extras={"n2_pct": 100.0 * self.inputs.n2_frac if n2_pct is None else n2_pct})
 
 
 def build_units(config: FleetConfig) -> list[Unit]:
