@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import warnings
 from typing import Any, Mapping, Sequence
 
@@ -18,7 +19,13 @@ def _z(confidence: float, owner: str) -> float:
     if not (0 < confidence < 1):
         raise ParameterError(f"The 'confidence' parameter of {owner} must be a float in (0, 1). "
                              f"Got {confidence!r} instead.")
-    return float(norm.ppf(0.5 + confidence / 2))
+    return _normal_quantile(float(0.5 + confidence / 2))
+
+
+@functools.lru_cache(maxsize=64)
+def _normal_quantile(p: float) -> float:
+    """``norm.ppf(p)``, remembered: a scoring run asks for the same few quantiles a hundred times."""
+    return float(norm.ppf(p))
 
 
 def wilson_interval(successes: Any, trials: Any, *,
