@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from fuelhm_bench.scoring.config import ScoringConfig
-from fuelhm_bench.scoring.intervals import rates_with_intervals
+from fuelhm_bench.scoring.intervals import per_unit_counts, pooled_rates
 from fuelhm_bench.scoring.run import HEALTHY, MULTIPLE
 from fuelhm_bench.scoring.thresholds import HealthyScoreModel
 from fuelhm_bench.taxonomy import MODE_IDS
@@ -58,7 +58,7 @@ UNDEFINED_RATES = {
 
 def modes_present(flights: pd.DataFrame) -> list[str]:
     """Modes (in MODE_IDS order) that are the single active fault of at least one flight."""
-    present = set(flights["true_mode"])
+    present = set(flights["true_mode"].unique())  # the few distinct values, not every flight's
     return [m for m in MODE_IDS if m in present]
 
 
@@ -75,23 +75,24 @@ def operating_points(flights: pd.DataFrame, model: HealthyScoreModel,
     return points
 
 
-def _unit_counts(flights: pd.DataFrame, points, modes: list[str]) -> pd.DataFrame:
-    """Per-unit counts of every (operating point, mode), one row per unit in order of first appearance.
+def _unit_counts(flights: pd.DataFrame, points, modes: list[str]) -> dict[str, np.ndarray]:
+    """Per-unit counts of every (operating point, mode): ``{column: array (n_points * n_modes, n_units)}``.
 
-    Columns: ``operating_point``, ``mode``, ``unit_id``, ``nfd, fp, fn, fd, n_incipient,
-    n_incipient_detected, n_healthy, n_detectable, n_detected, n_not_detected``. Counted with one
-    ``bincount`` per column over all flights at once (a groupby per point and mode cost most of
-    :func:`~fuelhm_bench.scoring.score_run`).
+    Rows are the (operating point, mode) pairs, point-major; columns the units in order of first
+    appearance (the long table of one row per (point, mode, unit) that :func:`rates_with_intervals`
+    would group). Columns: :data:`_COUNTS`. Counted with one ``bincount`` per column over all
+    flights at once (a groupby per point and mode cost most of :func:`~fuelhm_bench.scoring.score_run`).
     """
-    code, units = pd.factorize(flights["unit_id"], sort=False)
+    code, units = pd.factorize(flights["unit_id"], sort=False)  # -1: a missing unit id, left out as groupby does
     n_units = len(units)
     true_mode = flights["true_mode"].to_numpy(dtype=object)
     healthy = true_mode == HEALTHY
     detectable_any = flights["detectable"].to_numpy(dtype=bool)
     incipient_any = flights["incipient"].to_numpy(dtype=bool)
+    one_row = np.zeros(len(code), dtype=np.int64)
 
     def per_unit(mask: np.ndarray) -> np.ndarray:
-        return np.bincount(code[mask], minlength=n_units).astype(np.int64)
+        return per_unit_counts(one_row, code, (1, n_units), mask)[0]
 
     members = {mode: ~healthy if mode == ALL_MODES else (true_mode == mode) & ~healthy for mode in modes}
     blocks = {c: [] for c in ("nfd", "fp", "fn", "fd", "n_incipient", "n_incipient_detected")}
@@ -106,26 +107,19 @@ def _unit_counts(flights: pd.DataFrame, points, modes: list[str]) -> pd.DataFram
             blocks["fd"].append(per_unit(detectable & detected))
             blocks["n_incipient"].append(per_unit(incipient))
             blocks["n_incipient_detected"].append(per_unit(incipient & detected))
-    n_parts = len(points) * len(modes)
-    c = pd.DataFrame({
-        "operating_point": np.repeat(np.array([p[0] for p in points], dtype=object), len(modes) * n_units),
-        "mode": np.tile(np.repeat(np.array(modes, dtype=object), n_units), len(points)),
-        "unit_id": units.take(np.tile(np.arange(n_units), n_parts)),
-        **{name: np.concatenate(parts) if parts else np.zeros(0, np.int64) for name, parts in blocks.items()},
-    })
+    c = {name: np.array(parts, dtype=np.int64).reshape(len(parts), n_units) for name, parts in blocks.items()}
     c["n_healthy"] = c["fp"] + c["nfd"]
     c["n_detectable"] = c["fn"] + c["fd"]
     c["n_detected"] = c["fp"] + c["fd"]
     c["n_not_detected"] = c["fn"] + c["nfd"]
-    return c
+    return {name: c[name] for name in _COUNTS}
 
 
 def _notes(table: pd.DataFrame) -> list[str]:
-    notes = []
-    for _, row in table.iterrows():
-        parts = [f"{rate} undefined ({why})" for rate, why in UNDEFINED_RATES.items() if np.isnan(row[rate])]
-        notes.append("; ".join(parts))
-    return notes
+    """Per row, the undefined (NaN) rates of :data:`UNDEFINED_RATES` and why, ``"; "``-joined."""
+    undefined = {rate: np.isnan(table[rate].to_numpy(dtype=float)) for rate in UNDEFINED_RATES}
+    return ["; ".join(f"{rate} undefined ({why})" for rate, why in UNDEFINED_RATES.items() if undefined[rate][i])
+            for i in range(len(table))]
 
 
 def detection_table(flights: pd.DataFrame, model: HealthyScoreModel,
@@ -158,10 +152,12 @@ def detection_table(flights: pd.DataFrame, model: HealthyScoreModel,
         rates.
     """
     config = ScoringConfig() if config is None else config
-    counts = _unit_counts(flights, operating_points(flights, model, config), modes_present(flights) + [ALL_MODES])
-    out = rates_with_intervals(counts, keys=["operating_point", "mode"], counts=_COUNTS,
-                               rates=_RATES, confidence=config.confidence,
-                               n_bootstrap=config.n_bootstrap, random_state=config.random_state)
+    points = operating_points(flights, model, config)
+    modes = modes_present(flights) + [ALL_MODES]
+    keys = {"operating_point": np.repeat(np.array([p[0] for p in points], dtype=object), len(modes)),
+            "mode": np.tile(np.array(modes, dtype=object), len(points))}
+    out = pooled_rates(keys, _unit_counts(flights, points, modes), rates=_RATES, confidence=config.confidence,
+                       n_bootstrap=config.n_bootstrap, random_state=config.random_state)
     a_of = {config.operating_point_name(a): a for a in config.a_values}
     out.insert(1, "a", out["operating_point"].map(a_of).astype(float))
     out.insert(2, "threshold", [model.threshold(a_of[p]) if p in a_of else np.nan
@@ -169,6 +165,65 @@ def detection_table(flights: pd.DataFrame, model: HealthyScoreModel,
     out["balanced_accuracy"] = 1.0 - (out["fpr_standard"] + out["fnr_standard"]) / 2.0
     out["note"] = _notes(out)
     return out
+
+
+def mode_band_groups(modes: np.ndarray, bands: np.ndarray, units: np.ndarray, mode_rank: dict[str, int],
+                     band_rank: dict[str, int], keep: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """The (mode, band) rows and the unit columns of a per-unit table by mode and intensity band.
+
+    Rows are in the order that a stable sort of the flights on ``mode_rank * 100 + band_rank`` (a mode
+    or band without a rank last, in flight order) then ``groupby([mode, band], sort=False)`` gives;
+    units are in order of first appearance in the per-unit table, one row per (mode, band, unit) in
+    that order with the units of a (mode, band) in order of first appearance: the layout of
+    :func:`~fuelhm_bench.scoring.intervals.pooled_rates`.
+
+    Parameters
+    ----------
+    modes, bands, units : numpy.ndarray
+        Mode, band and unit id of every flight (a missing unit id leaves the flight out).
+    mode_rank, band_rank : dict of str to int
+        Sort rank of each mode and band.
+    keep : numpy.ndarray of bool or None, default=None
+        Flights to count; None keeps every flight.
+
+    Returns
+    -------
+    row, unit : numpy.ndarray of int
+        Row and unit column of every flight (-1 for a flight left out; a flight without a unit id has
+        the row of its mode and band when another flight makes it a row, and unit -1).
+    row_mode, row_band : numpy.ndarray of object
+        Mode and band of every row.
+    n_units : int
+        Number of unit columns.
+    """
+    unit_code, _ = pd.factorize(units, sort=False)
+    kept = np.arange(len(units)) if keep is None else np.flatnonzero(keep)
+    mode_code, mode_names = pd.factorize(modes[kept], sort=False)
+    band_code, band_names = pd.factorize(bands[kept], sort=False)
+    rank_m = np.array([mode_rank.get(m, np.nan) for m in mode_names], dtype=float)
+    rank_b = np.array([band_rank.get(b, np.nan) for b in band_names], dtype=float)
+    order = np.argsort(rank_m[mode_code] * 100 + rank_b[band_code], kind="stable")  # NaN last, as sort_values
+    n_bands = max(len(band_names), 1)
+    pair = (mode_code * n_bands + band_code)[order]
+    at = kept[order]
+    with_unit = unit_code[at] >= 0
+    row_sorted, pairs = pd.factorize(pair[with_unit], sort=False)  # a row needs a flight with a unit id
+    row_of_pair = np.full(len(mode_names) * n_bands, -1)
+    row_of_pair[pairs] = np.arange(len(pairs))
+    unit_sorted = unit_code[at[with_unit]]
+    n_all = int(unit_code.max()) + 1 if len(unit_code) else 0
+    cells, first = np.unique(row_sorted * n_all + unit_sorted, return_index=True)
+    listed = unit_sorted[first[np.lexsort((first, cells // max(n_all, 1)))]]  # by row, then first appearance
+    column_units = pd.unique(listed)
+    column = np.full(n_all, -1)
+    column[column_units] = np.arange(len(column_units))
+    row, unit = np.full(len(units), -1), np.full(len(units), -1)
+    row[at] = row_of_pair[pair]
+    unit[at[with_unit]] = column[unit_sorted]
+    pairs = np.asarray(pairs, dtype=np.int64)
+    return (row, unit, np.asarray(mode_names, dtype=object)[pairs // n_bands],
+            np.asarray(band_names, dtype=object)[pairs % n_bands], len(column_units))
 
 
 def detection_by_band(flights: pd.DataFrame, model: HealthyScoreModel,
@@ -193,24 +248,23 @@ def detection_by_band(flights: pd.DataFrame, model: HealthyScoreModel,
     """
     config = ScoringConfig() if config is None else config
     single = ~np.isin(flights["true_mode"].to_numpy(), [MULTIPLE])
-    sub = flights[single]
-    order = {b: i for i, b in enumerate((HEALTHY, *config.band_names))}
-    mode_order = {m: i for i, m in enumerate((HEALTHY, *MODE_IDS))}
-    parts = []
-    for name, _, _, detected in operating_points(sub, model, config):
-        c = pd.DataFrame({"operating_point": name, "mode": sub["true_mode"].to_numpy(),
-                          "band": sub["band"].to_numpy(), "unit_id": sub["unit_id"].to_numpy(),
-                          "n_flights": 1, "n_detected": detected.astype(np.int64)})
-        c["_o"] = c["mode"].map(mode_order) * 100 + c["band"].map(order)
-        c = c.sort_values("_o", kind="stable").drop(columns="_o")
-        parts.append(c.groupby(["operating_point", "mode", "band", "unit_id"], sort=False)
-                     .sum().reset_index())
-    counts = pd.concat(parts, ignore_index=True)
-    out = rates_with_intervals(counts, keys=["operating_point", "mode", "band"],
-                               counts=["n_flights", "n_detected"],
-                               rates={"detection_rate": ("n_detected", "n_flights")},
-                               confidence=config.confidence, n_bootstrap=config.n_bootstrap,
-                               random_state=config.random_state)
+    row, unit, row_mode, row_band, n_units = mode_band_groups(
+        flights["true_mode"].to_numpy(dtype=object), flights["band"].to_numpy(dtype=object),
+        flights["unit_id"].to_numpy(), {m: i for i, m in enumerate((HEALTHY, *MODE_IDS))},
+        {b: i for i, b in enumerate((HEALTHY, *config.band_names))}, keep=single)
+    points = operating_points(flights, model, config)
+    shape = (len(row_mode), n_units)
+    n_flights = per_unit_counts(row, unit, shape)
+    counts = {"n_flights": np.concatenate([n_flights] * len(points)),
+              "n_detected": np.concatenate([per_unit_counts(row, unit, shape, detected)
+                                            for _, _, _, detected in points])}
+    keys = {"operating_point": np.repeat(np.array([p[0] for p in points], dtype=object), len(row_mode)),
+            "mode": np.tile(row_mode, len(points)), "band": np.tile(row_band, len(points))}
+    out = pooled_rates(keys, counts, rates={"detection_rate": ("n_detected", "n_flights")},
+                       confidence=config.confidence, n_bootstrap=config.n_bootstrap,
+                       random_state=config.random_state)
+    if not len(out):  # no flight with at most one fault: the point names are text, as the grouped long table's
+        out["operating_point"] = out["operating_point"].astype(pd.Series([METHOD_ALARM]).dtype)
     lower_edge = dict(zip(config.band_names, (0.0, *config.band_edges)))
     out["detectable"] = [b != HEALTHY and lower_edge[b] >= config.detectable_fraction
                          for b in out["band"]]

@@ -13,16 +13,24 @@ import pandas as pd
 
 from fuelhm_bench.methods.tables import GUILT_COLUMNS
 from fuelhm_bench.scoring.config import ScoringConfig
-from fuelhm_bench.scoring.detection import ALL_MODES, modes_present
-from fuelhm_bench.scoring.intervals import rates_with_intervals
+from fuelhm_bench.scoring.detection import ALL_MODES, mode_band_groups, modes_present
+from fuelhm_bench.scoring.intervals import per_unit_counts, pooled_rates
 from fuelhm_bench.scoring.run import HEALTHY, NO_ALARM, TIE
 from fuelhm_bench.taxonomy import MODE_IDS
 
 __all__ = ["classification_table", "confusion_matrix", "diagnosis_table"]
 
 
-def _single_fault(flights: pd.DataFrame) -> pd.DataFrame:
-    return flights[flights["true_mode"].isin(MODE_IDS)]
+def _guilt_means(flights: pd.DataFrame, row: np.ndarray, alarmed: np.ndarray, n_rows: int) -> dict[str, np.ndarray]:
+    """Mean of every guilt column over the alarmed flights of each row (NaN for a row without one).
+
+    A pandas groupby mean on the row numbers, flights in table order: the same sums (pandas' compensated
+    summation, in that order) as the groupby on (true_mode, band) it replaces.
+    """
+    at = alarmed & (row >= 0)
+    guilt = pd.DataFrame({c: flights[c].to_numpy(dtype=float)[at] for c in GUILT_COLUMNS})
+    means = guilt.groupby(row[at], sort=False).mean().reindex(np.arange(n_rows))
+    return {c: means[c].to_numpy(dtype=float) for c in GUILT_COLUMNS}
 
 
 def diagnosis_table(flights: pd.DataFrame, config: ScoringConfig | None = None) -> pd.DataFrame:
@@ -46,27 +54,23 @@ def diagnosis_table(flights: pd.DataFrame, config: ScoringConfig | None = None) 
         ``fcr`` (+ intervals).
     """
     config = ScoringConfig() if config is None else config
-    sub = _single_fault(flights)
-    alarmed = sub["alarm"].to_numpy(dtype=bool)
-    wrong = alarmed & (sub["predicted"].to_numpy() != sub["true_mode"].to_numpy())
-    band_order = {b: i for i, b in enumerate(config.band_names)}
-    counts = pd.DataFrame({"true_mode": sub["true_mode"].to_numpy(),
-                           "band": sub["band"].to_numpy(), "unit_id": sub["unit_id"].to_numpy(),
-                           "n_flights": 1, "n_alarmed": alarmed.astype(np.int64),
-                           "n_false_classification": wrong.astype(np.int64)})
-    counts["_o"] = (counts["true_mode"].map({m: i for i, m in enumerate(MODE_IDS)}) * 100
-                    + counts["band"].map(band_order))
-    counts = counts.sort_values("_o", kind="stable").drop(columns="_o")
-    per_unit = counts.groupby(["true_mode", "band", "unit_id"], sort=False).sum().reset_index()
-    out = rates_with_intervals(per_unit, keys=["true_mode", "band"],
-                               counts=["n_flights", "n_alarmed", "n_false_classification"],
-                               rates={"alarm_rate": ("n_alarmed", "n_flights"),
-                                      "fcr": ("n_false_classification", "n_alarmed")},
-                               confidence=config.confidence, n_bootstrap=config.n_bootstrap,
-                               random_state=config.random_state)
-    guilt = sub.loc[alarmed, ["true_mode", "band", *GUILT_COLUMNS]]
-    means = guilt.groupby(["true_mode", "band"], sort=False)[list(GUILT_COLUMNS)].mean()
-    out = out.merge(means.reset_index(), on=["true_mode", "band"], how="left")
+    true_mode = flights["true_mode"].to_numpy(dtype=object)
+    single = np.isin(true_mode, MODE_IDS)
+    row, unit, row_mode, row_band, n_units = mode_band_groups(
+        true_mode, flights["band"].to_numpy(dtype=object), flights["unit_id"].to_numpy(),
+        {m: i for i, m in enumerate(MODE_IDS)}, {b: i for i, b in enumerate(config.band_names)}, keep=single)
+    alarmed = single & flights["alarm"].to_numpy(dtype=bool)
+    wrong = alarmed & (flights["predicted"].to_numpy(dtype=object) != true_mode)
+    shape = (len(row_mode), n_units)
+    counts = {"n_flights": per_unit_counts(row, unit, shape), "n_alarmed": per_unit_counts(row, unit, shape, alarmed),
+              "n_false_classification": per_unit_counts(row, unit, shape, wrong)}
+    out = pooled_rates({"true_mode": row_mode, "band": row_band}, counts,
+                       rates={"alarm_rate": ("n_alarmed", "n_flights"),
+                              "fcr": ("n_false_classification", "n_alarmed")},
+                       confidence=config.confidence, n_bootstrap=config.n_bootstrap,
+                       random_state=config.random_state)
+    for column, mean in _guilt_means(flights, row, alarmed, len(out)).items():
+        out[column] = mean
     fixed = ["true_mode", "band", "n_flights", "n_alarmed", "alarm_rate", "alarm_rate_ci_low",
              "alarm_rate_ci_high", *GUILT_COLUMNS]
     return out[fixed + [c for c in out.columns if c not in fixed]]
@@ -88,27 +92,23 @@ def classification_table(flights: pd.DataFrame,
         fcr_detectable`` (+ intervals).
     """
     config = ScoringConfig() if config is None else config
-    true_mode = flights["true_mode"].to_numpy()
+    true_mode = flights["true_mode"].to_numpy(dtype=object)
     single = np.isin(true_mode, MODE_IDS)
     alarmed = single & flights["alarm"].to_numpy(dtype=bool)
     det = flights["detectable"].to_numpy(dtype=bool)
-    wrong = alarmed & (flights["predicted"].to_numpy() != true_mode)
-    cols = ["n_alarmed", "n_false_classification", "n_alarmed_detectable",
-            "n_false_classification_detectable"]
-    parts = []
-    for mode in modes_present(flights) + [ALL_MODES]:
+    wrong = alarmed & (flights["predicted"].to_numpy(dtype=object) != true_mode)
+    unit, units = pd.factorize(flights["unit_id"], sort=False)  # -1: a missing unit id, left out as groupby does
+    modes = modes_present(flights) + [ALL_MODES]
+    counts = {c: [] for c in ("n_alarmed", "n_false_classification", "n_alarmed_detectable",
+                              "n_false_classification_detectable")}
+    one_row = np.zeros(len(unit), dtype=np.int64)
+    for mode in modes:
         member = single if mode == ALL_MODES else (true_mode == mode)
-        c = pd.DataFrame({"unit_id": flights["unit_id"].to_numpy(),
-                          "n_alarmed": alarmed & member,
-                          "n_false_classification": wrong & member,
-                          "n_alarmed_detectable": alarmed & member & det,
-                          "n_false_classification_detectable": wrong & member & det})
-        c = c.groupby("unit_id", sort=False)[cols].sum().astype(np.int64).reset_index()
-        c.insert(0, "mode", mode)
-        parts.append(c)
-    counts = pd.concat(parts, ignore_index=True)
-    return rates_with_intervals(
-        counts, keys=["mode"], counts=cols,
+        for column, mask in zip(counts, (alarmed, wrong, alarmed & det, wrong & det)):
+            counts[column].append(per_unit_counts(one_row, unit, (1, len(units)), mask & member)[0])
+    return pooled_rates(
+        {"mode": np.array(modes, dtype=object)},
+        {c: np.array(parts, dtype=np.int64).reshape(len(modes), len(units)) for c, parts in counts.items()},
         rates={"fcr": ("n_false_classification", "n_alarmed"),
                "fcr_detectable": ("n_false_classification_detectable", "n_alarmed_detectable")},
         confidence=config.confidence, n_bootstrap=config.n_bootstrap,
@@ -136,15 +136,24 @@ def confusion_matrix(flights: pd.DataFrame, config: ScoringConfig | None = None,
         are not counted.
     """
     config = ScoringConfig() if config is None else config
-    keep = flights["true_mode"].to_numpy() == HEALTHY
-    faulty_ok = flights["true_mode"].isin(MODE_IDS).to_numpy().copy()
+    true_mode = flights["true_mode"].to_numpy(dtype=object)
+    keep = true_mode == HEALTHY
+    faulty_ok = np.isin(true_mode, MODE_IDS)
     if not include_incipient:
         faulty_ok &= flights["detectable"].to_numpy(dtype=bool)
-    sub = flights[keep | faulty_ok]
-    rows = [HEALTHY, *modes_present(sub)]
+    keep |= faulty_ok
+    rows = [HEALTHY, *modes_present(flights[keep])]
     cols = [NO_ALARM, *MODE_IDS, TIE]
-    table = pd.crosstab(pd.Categorical(sub["true_mode"], categories=rows),
-                        pd.Categorical(sub["predicted"], categories=cols), dropna=False)
-    table.index = pd.Index(rows, name="true_condition")
-    table.columns = pd.Index(cols, name="predicted")
-    return table.astype(np.int64)
+    row = _positions(true_mode[keep], rows)
+    col = _positions(flights["predicted"].to_numpy(dtype=object)[keep], cols)
+    counted = (row >= 0) & (col >= 0)  # crosstab leaves out a value outside the categories
+    cells = np.bincount(row[counted] * len(cols) + col[counted], minlength=len(rows) * len(cols))
+    return pd.DataFrame(cells.astype(np.int64).reshape(len(rows), len(cols)),
+                        index=pd.Index(rows, name="true_condition"), columns=pd.Index(cols, name="predicted"))
+
+
+def _positions(values: np.ndarray, categories: list[str]) -> np.ndarray:
+    """Position of every value in ``categories`` (-1 when it is not one)."""
+    codes, uniques = pd.factorize(values, sort=False)
+    at = {c: i for i, c in enumerate(categories)}
+    return np.append(np.array([at.get(u, -1) for u in uniques], dtype=np.int64), -1)[codes]

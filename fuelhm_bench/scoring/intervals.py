@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import warnings
 from typing import Any, Mapping, Sequence
 
@@ -11,14 +12,20 @@ from scipy.stats import norm
 
 from fuelhm_bench.errors import ParameterError
 
-__all__ = ["bootstrap_ratio_interval", "rates_with_intervals", "wilson_interval"]
+__all__ = ["bootstrap_ratio_interval", "per_unit_counts", "pooled_rates", "rates_with_intervals", "wilson_interval"]
 
 
 def _z(confidence: float, owner: str) -> float:
     if not (0 < confidence < 1):
         raise ParameterError(f"The 'confidence' parameter of {owner} must be a float in (0, 1). "
                              f"Got {confidence!r} instead.")
-    return float(norm.ppf(0.5 + confidence / 2))
+    return _normal_quantile(float(0.5 + confidence / 2))
+
+
+@functools.lru_cache(maxsize=64)
+def _normal_quantile(p: float) -> float:
+    """``norm.ppf(p)``, remembered: a scoring run asks for the same few quantiles a hundred times."""
+    return float(norm.ppf(p))
 
 
 def wilson_interval(successes: Any, trials: Any, *,
@@ -170,6 +177,7 @@ def rates_with_intervals(unit_counts: pd.DataFrame, *, keys: Sequence[str],
     keys = list(keys)
     grouped = unit_counts.groupby(keys, sort=False, dropna=False)
     out = grouped[list(counts)].sum().reset_index()
+    wide = None
     if n_bootstrap:
         g = grouped.ngroup().to_numpy()
         u, _ = pd.factorize(unit_counts[unit_column])
@@ -179,16 +187,92 @@ def rates_with_intervals(unit_counts: pd.DataFrame, *, keys: Sequence[str],
             arr = np.zeros(shape)
             np.add.at(arr, (g, u), unit_counts[col].to_numpy(dtype=float))
             wide[col] = arr
+    pooled = {c: out[c].to_numpy(dtype=float) for pair in rates.values() for c in pair}
+    for name, values in _rate_columns(pooled, rates, wide, confidence=confidence, n_bootstrap=n_bootstrap,
+                                      random_state=random_state).items():
+        out[name] = values
+    return out
+
+
+def per_unit_counts(row: np.ndarray, unit: np.ndarray, shape: tuple[int, int],
+                    member: np.ndarray | None = None) -> np.ndarray:
+    """How many flights of each (row, unit) pair are members, for :func:`pooled_rates`.
+
+    Parameters
+    ----------
+    row, unit : numpy.ndarray of int
+        Row (output group) and unit (column) of every flight; ``-1`` in either leaves the flight out.
+    shape : (int, int)
+        ``(n_rows, n_units)``.
+    member : numpy.ndarray of bool or None, default=None
+        Flights to count; None counts every flight.
+
+    Returns
+    -------
+    numpy.ndarray of int64, shape ``shape``
+    """
+    n_rows, n_units = shape
+    keep = (row >= 0) & (unit >= 0)
+    if member is not None:
+        keep &= member
+    cell = row[keep] * n_units + unit[keep]
+    return np.bincount(cell, minlength=n_rows * n_units).astype(np.int64).reshape(n_rows, n_units)
+
+
+def pooled_rates(keys: Mapping[str, np.ndarray], unit_counts: Mapping[str, np.ndarray], *,
+                 rates: Mapping[str, tuple[str, str]], confidence: float = 0.95, n_bootstrap: int = 0,
+                 random_state: int = 0) -> pd.DataFrame:
+    """:func:`rates_with_intervals` from counts already laid out per (row, unit).
+
+    The table is the one :func:`rates_with_intervals` gives for a long table whose groups
+    (the output rows) are in the order of ``keys`` and whose units, in order of first appearance,
+    are the columns of ``unit_counts`` (a unit absent from a group counts 0): the same values,
+    dtypes and, with ``n_bootstrap``, the same resamples. It skips building and grouping the long
+    table, which cost most of the scoring tables.
+
+    Parameters
+    ----------
+    keys : mapping of str to numpy.ndarray
+        Key columns of the output rows, each of length ``n_rows``.
+    unit_counts : mapping of str to numpy.ndarray of int64, shape (n_rows, n_units)
+        Per-unit count of every count column; the output keeps their order.
+    rates : mapping of str to (str, str)
+        ``name -> (numerator column, denominator column)``.
+    confidence : float, default=0.95
+    n_bootstrap : int, default=0
+    random_state : int, default=0
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``keys``, the counts summed over units, then the rates and their intervals.
+    """
+    pooled = {c: per_unit.sum(axis=1) for c, per_unit in unit_counts.items()}
+    wide = ({c: unit_counts[c].astype(float) for pair in rates.values() for c in pair}
+            if n_bootstrap else None)
+    rate_columns = _rate_columns(pooled, rates, wide, confidence=confidence, n_bootstrap=n_bootstrap,
+                                 random_state=random_state)
+    return pd.DataFrame({**keys, **pooled, **rate_columns})  # one frame: a column insertion each costs more
+
+
+def _rate_columns(pooled: Mapping[str, Any], rates: Mapping[str, tuple[str, str]],
+                  wide: Mapping[str, np.ndarray] | None, *, confidence: float, n_bootstrap: int,
+                  random_state: int) -> dict[str, np.ndarray]:
+    """Each rate of the pooled counts with its Wilson (and bootstrap) interval, by output column name.
+
+    ``pooled`` maps count columns to arrays summed over units, ``wide`` (with ``n_bootstrap``) to
+    arrays of float of shape (n_rows, n_units) per unit.
+    """
+    columns = {}
     for name, (num_col, den_col) in rates.items():
-        k = out[num_col].to_numpy(dtype=float)
-        n = out[den_col].to_numpy(dtype=float)
+        k = np.asarray(pooled[num_col], dtype=float)
+        n = np.asarray(pooled[den_col], dtype=float)
         with np.errstate(divide="ignore", invalid="ignore"):
-            out[name] = np.where(n > 0, k / np.where(n > 0, n, 1.0), np.nan)
-        out[f"{name}_ci_low"], out[f"{name}_ci_high"] = wilson_interval(k, n,
-                                                                        confidence=confidence)
+            columns[name] = np.where(n > 0, k / np.where(n > 0, n, 1.0), np.nan)
+        columns[f"{name}_ci_low"], columns[f"{name}_ci_high"] = wilson_interval(k, n, confidence=confidence)
         if n_bootstrap:
             low, high = bootstrap_ratio_interval(wide[num_col], wide[den_col],
                                                  n_resamples=n_bootstrap, confidence=confidence,
                                                  random_state=random_state)
-            out[f"{name}_boot_low"], out[f"{name}_boot_high"] = low, high
-    return out
+            columns[f"{name}_boot_low"], columns[f"{name}_boot_high"] = low, high
+    return columns

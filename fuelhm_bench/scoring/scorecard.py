@@ -15,7 +15,7 @@ from fuelhm_bench.scoring.detection import (ALL_MODES, METHOD_ALARM, UNDEFINED_R
 from fuelhm_bench.scoring.diagnosis import (classification_table, confusion_matrix,
                                             diagnosis_table)
 from fuelhm_bench.scoring.run import Run, flight_table
-from fuelhm_bench.scoring.summary import summary_components, summary_score
+from fuelhm_bench.scoring.summary import score_of_components, summary_components
 from fuelhm_bench.scoring.thresholds import HealthyScoreModel, fit_healthy_model, threshold_table
 
 __all__ = ["HEADLINE_KPIS", "SCORECARD_TABLES", "Scorecard", "headline_kpis", "score_run", "undefined_kpis"]
@@ -232,6 +232,7 @@ def score_run(run: Run, config: ScoringConfig | None = None) -> Scorecard:
     classification = classification_table(flights, config)
     if classification["fcr"].isna().any():
         notes.append("fcr undefined (NaN) where no single-fault flight is alarmed")
+    components = summary_components(flights, config)
     return Scorecard(
         name=run.name, config=config, healthy_model=model,
         thresholds=threshold_table(model, config.a_values), flights=flights,
@@ -240,5 +241,4 @@ def score_run(run: Run, config: ScoringConfig | None = None) -> Scorecard:
         classification=classification,
         confusion=confusion_matrix(flights, config), delays=delays,
         delay_summary=delay_summary(delays, config),
-        summary_components=summary_components(flights, config),
-        summary_score=summary_score(flights, config), notes=tuple(notes))
+        summary_components=components, summary_score=score_of_components(components), notes=tuple(notes))

@@ -85,5 +85,9 @@ def summary_score(flights: pd.DataFrame, config: ScoringConfig | None = None) ->
     --------
     See docs/scoring.md, section "Normalised summary score", for a worked value.
     """
-    comp = summary_components(flights, config)
-    return float(100.0 * comp["term"].mean()) if len(comp) else float("nan")
+    return score_of_components(summary_components(flights, config))
+
+
+def score_of_components(components: pd.DataFrame) -> float:
+    """:func:`summary_score` from the table of :func:`summary_components` (NaN when it has no row)."""
+    return float(100.0 * components["term"].mean()) if len(components) else float("nan")
