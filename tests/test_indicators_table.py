@@ -133,3 +133,23 @@ def test_accepts_io_flight_arrays(flights):
     assert not fa.time_s.flags.writeable
     table = extract_table([fa])
     pd.testing.assert_frame_equal(table, extract_table([f]))
+
+
+@pytest.mark.parametrize("case", ["empty", "text ids", "flagged"])
+def test_column_dtypes_hold_for_every_table(flights, case):
+    """Indicators float64, flags bool, counts int64, quality_reason object (never pandas' inferred string
+    dtype), identifiers as pandas infers them (object when the table is empty), whatever the flights."""
+    from fuelhm_bench.taxonomy import ALL_INDICATOR_NAMES
+
+    good = flights[0]
+    bad = Flight("bad-1", "ESN-1", good.time_s[::-1].copy(), good.current_ma, good.position_mm)
+    chosen = {"empty": [], "text ids": flights[:2], "flagged": [good, bad]}[case]
+    table = extract_table(chosen, on_error="flag")
+    for name in ALL_INDICATOR_NAMES:
+        assert table[name].dtype == np.float64 and table[f"{name}_valid"].dtype == bool, name
+    assert table["n_points"].dtype == np.int64 and table["quality_reason"].dtype == object
+    if case == "empty":
+        assert table["flight_id"].dtype == object
+    else:
+        assert table["flight_id"].tolist() == [f.flight_id for f in chosen]
+        assert table["unit_id"].tolist() == [f.unit_id for f in chosen]

@@ -311,10 +311,18 @@ def extract_table(flights: Iterable[object], config: ExtractionConfig | None = N
             result = IndicatorResult.invalid((str(exc),))
         rows.append({"flight_id": flight_id, "unit_id": unit_id, **result.to_row()})
     columns = table_columns(with_unit_id=has_unit)
-    table = pd.DataFrame(rows, columns=columns)
-    for name in ALL_INDICATOR_NAMES:
-        table[name] = table[name].astype(np.float64)
-        table[f"{name}_valid"] = table[f"{name}_valid"].astype(bool)
-    table["n_points"] = table["n_points"].astype(np.int64)
-    table["quality_reason"] = table["quality_reason"].astype(object)
-    return table
+    # Each column built once with its dtype (a frame of dicts, then one astype per column, cost more
+    # than the indicators of a short flight); the identifiers keep pandas' own inference.
+    dtypes = {name: np.float64 for name in ALL_INDICATOR_NAMES}
+    dtypes.update({f"{name}_valid": bool for name in ALL_INDICATOR_NAMES})
+    dtypes["n_points"] = np.int64
+    data = {}
+    for column in columns:
+        values = [row[column] for row in rows]
+        if column in dtypes:
+            data[column] = np.array(values, dtype=dtypes[column])
+        elif column == "quality_reason" or not rows:  # object: not the str (empty: float) pandas would infer
+            data[column] = pd.Series(values, dtype=object)
+        else:
+            data[column] = values
+    return pd.DataFrame(data, columns=columns)
