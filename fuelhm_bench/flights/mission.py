@@ -22,6 +22,7 @@ the flight (recorded; the nominal model has no temperature effect).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -133,6 +134,21 @@ def _flight_channels(target, n_start, drive, b, start, a, n2_max, n2_low, n2_spa
     return n2, demand, n2_pct, demand_mm
 
 
+@functools.lru_cache(maxsize=16)
+def _test_sweep(T: float, lo: float, hi: float, rates: tuple, n_start: int) -> np.ndarray:
+    """:meth:`MissionProfile._test_sweep` of these settings, read-only (one array per profile)."""
+    parts = [np.full(int(2.0 / T), lo)]
+    for rate in rates:
+        m = max(int(round((hi - lo) / rate / T)), 1)
+        ramp = np.linspace(lo, hi, m + 1)[1:]
+        parts += [ramp, np.full(int(1.0 / T), hi), ramp[::-1], np.full(int(1.0 / T), lo)]
+    seq = np.concatenate(parts)
+    out = np.full(n_start, lo)
+    out[: min(n_start, seq.size)] = seq[:n_start]
+    out.flags.writeable = False
+    return out
+
+
 @dataclass(frozen=True)
 class MissionProfile:
     """Parameters of the flight profile.
@@ -233,18 +249,9 @@ class MissionProfile:
         return out[()] if out.ndim == 0 else out
 
     def _test_sweep(self, n_start: int) -> np.ndarray:
-        """Demand [m] of the engine-start test sweep: ramps up and down at each rate, then hold."""
-        T = self.frame_s
-        lo, hi = self.sweep_low_m, self.sweep_high_m
-        parts = [np.full(int(2.0 / T), lo)]
-        for rate in self.sweep_rates_m_s:
-            m = max(int(round((hi - lo) / rate / T)), 1)
-            ramp = np.linspace(lo, hi, m + 1)[1:]
-            parts += [ramp, np.full(int(1.0 / T), hi), ramp[::-1], np.full(int(1.0 / T), lo)]
-        seq = np.concatenate(parts)
-        out = np.full(n_start, lo)
-        out[: min(n_start, seq.size)] = seq[:n_start]
-        return out
+        """Demand [m] of the engine-start test sweep: ramps up and down at each rate, then hold
+        (the same for every flight of a profile: made once, read-only)."""
+        return _test_sweep(self.frame_s, self.sweep_low_m, self.sweep_high_m, self.sweep_rates_m_s, n_start)
 
     def sample(self, rng: np.random.Generator, *, fuel_temperature: bool = True) -> FlightInputs:
         """Draw one flight's inputs.
