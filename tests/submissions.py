@@ -293,7 +293,7 @@ class ReadsEnvirons:
         raise RuntimeError(f"ENVIRONS readable {readable} secret {found}")
 
     def start_unit(self, unit_id):
-        pass
+        """Never reached: ``fit`` always raises."""
 
     def decide(self, row):
         return Decision(score=0.0, alarm=False, guilt=np.zeros(7))

@@ -104,21 +104,24 @@ def _digest_table(digest, table: pd.DataFrame) -> None:
         column = table[name]
         digest.update(b"\0column\0" + str(name).encode("utf-8", "surrogatepass") + b"\0")
         kind = getattr(column.dtype, "kind", "O")
-        missing = bool(column.isna().any())
-        if kind == "b" and not missing:
+        exact = kind in "biu" and not column.isna().any()  # (a nullable column with a missing value: tokens)
+        if kind == "b" and exact:
             digest.update(b"b" + column.to_numpy(dtype=np.uint8).tobytes())
-        elif kind in "iu" and not missing:
+        elif kind in "iu" and exact:
             digest.update(b"i" + column.to_numpy(dtype="<i8").tobytes())
         elif kind == "f":
             values = column.to_numpy(dtype="<f8", na_value=np.nan)
-            digest.update(b"f" + np.where(np.isnan(values), np.nan, values).tobytes())  # (a copy: the table is untouched)
+            canonical = np.where(np.isnan(values), np.nan, values)  # a copy: the table is untouched
+            digest.update(b"f" + canonical.tobytes())
         else:
             digest.update(b"o" + "\x1f".join(map(_value_token, column.tolist())).encode("utf-8", "surrogatepass"))
 
 
 def _value_token(value) -> str:
     """One value of a column of mixed or text values, in :func:`_digest_table`'s canonical form."""
-    if value is None or value is pd.NA or value is pd.NaT or (isinstance(value, (float, np.floating)) and value != value):
+    if value is None or value is pd.NA or value is pd.NaT:
+        return "\0"
+    if isinstance(value, (float, np.floating)) and value != value:  # NaN
         return "\0"
     if isinstance(value, (bool, np.bool_)):
         return "b1" if value else "b0"

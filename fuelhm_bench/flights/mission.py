@@ -136,7 +136,9 @@ def _flight_channels(target, n_start, drive, b, start, a, n2_max, n2_low, n2_spa
 
 @functools.lru_cache(maxsize=16)
 def _test_sweep(T: float, lo: float, hi: float, rates: tuple, n_start: int) -> np.ndarray:
-    """:meth:`MissionProfile._test_sweep` of these settings, read-only (one array per profile)."""
+    """Demand [m] of the engine-start test sweep (ramps up and down at each rate ``rates`` [m/s] between
+    ``lo`` and ``hi`` [m], then hold) over ``n_start`` frames of ``T`` [s]: the same for every flight
+    of a profile, so made once and read-only."""
     parts = [np.full(int(2.0 / T), lo)]
     for rate in rates:
         m = max(int(round((hi - lo) / rate / T)), 1)
@@ -248,11 +250,6 @@ class MissionProfile:
         np.add(out, self.sweep_low_m, out=out)
         return out[()] if out.ndim == 0 else out
 
-    def _test_sweep(self, n_start: int) -> np.ndarray:
-        """Demand [m] of the engine-start test sweep: ramps up and down at each rate, then hold
-        (the same for every flight of a profile: made once, read-only)."""
-        return _test_sweep(self.frame_s, self.sweep_low_m, self.sweep_high_m, self.sweep_rates_m_s, n_start)
-
     def sample(self, rng: np.random.Generator, *, fuel_temperature: bool = True) -> FlightInputs:
         """Draw one flight's inputs.
 
@@ -309,7 +306,8 @@ class MissionProfile:
         # [0, 1.15], the scheduled demand (test sweep first) and the recorded channels: one compiled pass
         # (_flight_channels: the fluctuation added to the demand, then the lag, then the schedule).
         a = np.exp(-T / self.engine_time_constant_s)
-        sweep = self._test_sweep(n_start) if self.test_sweep and n_start > 0 else np.empty(0)
+        sweep = (_test_sweep(T, self.sweep_low_m, self.sweep_high_m, self.sweep_rates_m_s, n_start)
+                 if self.test_sweep and n_start > 0 else np.empty(0))
         n2, demand, n2_pct, demand_mm = _flight_channels(
             target, n_start, drive, float(b), float(start), float(a), 1.15, float(self.schedule_n2_low),
             float(self.schedule_n2_high - self.schedule_n2_low), float(self.sweep_low_m),

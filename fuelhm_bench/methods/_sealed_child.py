@@ -176,7 +176,7 @@ def _drop_capabilities() -> str:
         libc.prctl(47, 4, 0, 0, 0)  # PR_CAP_AMBIENT, PR_CAP_AMBIENT_CLEAR_ALL
         if libc.capset(ctypes.byref(_CapHeader(0x20080522, 0)), (_CapData * 2)()) != 0:  # _LINUX_CAPABILITY_VERSION_3
             return ""
-    except (OSError, AttributeError, ValueError, StopIteration):
+    except (OSError, AttributeError, ValueError):
         return ""
     return "no capabilities"
 

@@ -31,7 +31,7 @@ from fuelhm_bench.scoring.config import ScoringConfig
 from fuelhm_bench.scoring.run import HEALTHY, TIE, UNKNOWN
 from fuelhm_bench.taxonomy import MODE_IDS
 
-__all__ = ["summary_components", "summary_score"]
+__all__ = ["score_of_components", "summary_components", "summary_score"]
 
 
 def summary_components(flights: pd.DataFrame,
