@@ -310,10 +310,27 @@ def test_forward_selection_stops_at_a_remainder_of_structural_size_once_the_scor
     _, flights = _flights(AltEffects(lvdt_lag_s=0.05, hysteresis_a=3e-4), seed=41)
     cfg = dataclasses.replace(SMALL, candidates=("lvdt_lag", "torque_motor_hysteresis", "spool_overlap"))
     monkeypatch.setattr(d, "SCORE_SCALE_FRAMES", 1)
+    monkeypatch.setattr(d, "SCORE_MIN_FRAMES", 1)
     lines = []
     r = find_discrepancy(flights, config=cfg, log=lines.append)
     assert [m.effect for m in r.effect_set] == ["lvdt_lag"]
     assert any("no further effect searched" in line and "misfit score" in line for line in lines), lines
+
+
+def test_the_search_gate_projects_the_score_to_the_calibrated_data_size():
+    # A systematic residual's z^2 grows with the samples behind it; noise adds about 1. The gate reads
+    # the score projected to SCORE_SCALE_FRAMES, so held-out data a little under that size (178,771
+    # replayed frames on the altsim friction case of the study, seeds +2000) are not treated as too
+    # small to judge, and data under half of it are.
+    from fuelhm_bench.calibration.discrepancy import SCORE_MIN_FRAMES, SCORE_SCALE_FRAMES, scaled_score
+
+    assert SCORE_MIN_FRAMES == SCORE_SCALE_FRAMES // 2
+    assert scaled_score(12.4, SCORE_SCALE_FRAMES) == 12.4
+    assert scaled_score(12.4, 10 * SCORE_SCALE_FRAMES) == 12.4  # the held-out cap keeps larger data on scale
+    assert scaled_score(12.4, 178_771) == pytest.approx(1.0 + 11.4 * SCORE_SCALE_FRAMES / 178_771)
+    assert scaled_score(1.0, SCORE_MIN_FRAMES) == pytest.approx(1.0)  # pure noise stays at 1
+    assert scaled_score(16.0, SCORE_MIN_FRAMES) == pytest.approx(31.0)
+    assert scaled_score(16.0, SCORE_MIN_FRAMES - 1) is None
 
 
 def test_early_stop_drops_a_fit_that_cannot_earn_its_parameters():

@@ -77,6 +77,8 @@ SIGNIFICANT_SCORE = 3.0
 #: Held-out frames from which the misfit score is on the scale of ``unexplained_score`` (its calibration
 #: used the default ``heldout_max_frames`` cap of 200,000 frames, reached from about 12 flights of 10 min).
 SCORE_SCALE_FRAMES = 180_000
+#: Held-out frames below which the forward selection's score gate is not applied (:func:`scaled_score`).
+SCORE_MIN_FRAMES = SCORE_SCALE_FRAMES // 2
 
 #: Candidate fits use Broyden updates of the recalibration columns of the Jacobian
 #: (:func:`~fuelhm_bench.calibration.fit.fit_joint`).
@@ -131,13 +133,14 @@ class DiscrepancyConfig:
         structural mismatch alone, and a second member is as much a claim as the first).
     continue_ratio : float, default=1.5
         The forward selection stops when the held-out gap is below this multiple of its noise floor.
-        On held-out data of at least ``SCORE_SCALE_FRAMES`` replayed frames (where the misfit score is
-        on its calibrated scale), it also stops when what the set leaves scores below
-        ``continue_score`` and no value of the set's fit is ``absorbed_z`` sigmas or more from the
-        input model. Such a remainder is what a plausible but different model leaves; a further member
-        would be fitted to structural mismatch, and each search refits every remaining candidate (on
-        the altsim friction benchmark, after ``rod_friction`` is named, a search in the direct solver
-        that added nothing doubled the cost). On smaller data the score cannot tell, and the search runs.
+        On held-out data of at least ``SCORE_MIN_FRAMES`` replayed frames, it also stops when what the set
+        leaves scores below ``continue_score`` (projected to ``SCORE_SCALE_FRAMES``, :func:`scaled_score`)
+        and no value of the set's fit counts as absorbing for the verdict (:func:`remaining_flags`:
+        beyond ``absorbed_z`` sigmas, or at the band's limit and trading off against the member). Such a
+        remainder is what a plausible but different model leaves; a further member would be fitted to
+        structural mismatch, and each search refits every remaining candidate (on the altsim friction
+        benchmark, after ``rod_friction`` is named, a search in the direct solver that added nothing
+        doubled the cost). On smaller data the score cannot tell, and the search runs.
     continue_score : float, default=30.0
         The misfit score from which the forward selection searches a further member (above every
         healthy altsim score of several units, 27). Lower than ``unexplained_score``: a search is
@@ -1217,6 +1220,87 @@ def trades_off(member: "SetMember", gap_bounded: float, free: Sequence[Candidate
     return moved or better
 
 
+def remaining_flags(fit: JointFit, fit_params: tuple, params: tuple, members: Sequence["SetMember"],
+                    outcomes: Sequence[CandidateOutcome], cands: Sequence[EffectCandidate], gap_now: float,
+                    start_model, config: DiscrepancyConfig,
+                    say: Callable[[str], None] | None = None) -> tuple[ParameterFlag, ...]:
+    """The values of a set's fit that hold a disagreement the set does not explain (the verdict's
+    absorbing test, also the forward selection's stopping test).
+
+    Values beyond ``absorbed_z`` dispersion sigmas of the input model, for one parameter in several
+    units (:func:`~fuelhm_bench.calibration.flags.fleet_wide`), and values of a plausible (bounded)
+    fit that sit at the band's limit in several units -- except, for a one-member set, limit values
+    that do not trade off against the member (:func:`trades_off`): those stay flags only.
+
+    Parameters
+    ----------
+    fit : JointFit
+        The set's fit.
+    fit_params : tuple of FitParameter
+        Its recalibration parameters (narrowed to the band for a plausible fit).
+    params : tuple of FitParameter
+        The free recalibration parameters.
+    members : sequence of SetMember
+        The set so far.
+    outcomes : sequence of CandidateOutcome
+        The first round's outcomes (the free fit of a member is looked up there).
+    cands : sequence of EffectCandidate
+        The candidates.
+    gap_now : float
+        Held-out gap of the set [mm/s].
+    start_model : LoopModel
+        The input model.
+    config : DiscrepancyConfig
+        Settings (``absorbed_z``, ``tradeoff_tolerance``).
+    say : callable, optional
+        Receives the message when at-limit values are exempted.
+
+    Returns
+    -------
+    tuple of ParameterFlag
+    """
+    n_fit_units = len(fit.unit_values)
+    flags = fleet_wide(absorbing_parameters(fit.unit_values, start_model, z_max=config.absorbed_z), n_fit_units)
+    # A fit kept within the dispersion that ends at its limit wants to go beyond it: absorbed too.
+    limit_hits = at_limit(fit.unit_values, [p for p in fit_params if dispersion_sigma(start_model, p.path)
+                                            and p not in params])
+    if limit_hits:
+        at_lim = absorbing_parameters(fit.unit_values, start_model, z_max=0.0)
+        kept = {(f.unit, f.path) for f in fleet_wide([f for f in at_lim if (f.unit, f.path) in set(limit_hits)],
+                                                     n_fit_units)}
+        limit_hits = [h for h in limit_hits if h in kept]
+    if limit_hits and len(members) == 1 and not trades_off(
+            members[0], gap_now, [c for c in outcomes if c.effect == members[0].effect and not c.bounded
+                                  and c.tag == "1" and not c.held],
+            next(c for c in cands if c.effect == members[0].effect), config.tradeoff_tolerance):
+        if say is not None:
+            say("values at the dispersion limit do not trade off against " + members[0].effect
+                + " (its free fit gives the same parameter and no better held-out gap): flagged, not absorbing")
+        exempt = set(limit_hits)
+        return tuple(f for f in flags if (f.unit, f.path) not in exempt)
+    if limit_hits:
+        hit = set(limit_hits)
+        extra = tuple(f for f in absorbing_parameters(fit.unit_values, start_model, z_max=0.0)
+                      if (f.unit, f.path) in hit and f not in flags)
+        flags = tuple(flags) + extra
+    return tuple(flags)
+
+
+def scaled_score(score: float, n_frames: int) -> float | None:
+    """The misfit score projected to ``SCORE_SCALE_FRAMES`` held-out frames, or None on data too small.
+
+    The score is the mean ``z^2`` of the curve cells; a systematic residual's ``z^2`` grows in
+    proportion to the samples behind it, noise adds about 1. So ``1 + (score - 1) * SCALE / n`` is
+    what the same disagreement would score on the data size the thresholds were calibrated at.
+    Below half that size (:data:`SCORE_MIN_FRAMES`) the projection is left unused (None).
+    """
+    if n_frames < SCORE_MIN_FRAMES:
+        return None
+    if n_frames >= SCORE_SCALE_FRAMES:
+        return float(score)
+    return 1.0 + (float(score) - 1.0) * SCORE_SCALE_FRAMES / n_frames
+
+
 def decide(outcomes: Sequence[CandidateOutcome], *, bic_threshold: float, min_gap_reduction: float) -> str:
     """Apply the decision rule (:attr:`DiscrepancyConfig.decision_rule`): an effect id or ``"none"``.
 
@@ -1494,17 +1578,19 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             say(f"held-out gap {g_new:.3f} mm/s within {config.continue_ratio:g}x its noise floor "
                 f"({floor_cur:.3f}): no further effect searched")
             break
-        # On data large enough for the misfit score to be on its calibrated scale, a remainder scoring
-        # under continue_score with no value beyond absorbed_z is what a plausible but different model
-        # leaves: nothing further is searched in it.
-        if v_input.size >= SCORE_SCALE_FRAMES:
-            score_cur = region_map(held, v_cur, levels, cal.curve, noise.tau).score
-            if score_cur < config.continue_score and not fleet_wide(absorbing_parameters(
-                    res.unit_values, start, z_max=config.absorbed_z), len(res.unit_values)):
-                say(f"what the set leaves is at the level of a plausible model's mismatch (misfit score "
-                    f"{score_cur:.1f} < {config.continue_score:g}, no value beyond {config.absorbed_z:g} "
-                    f"sigmas): no further effect searched")
-                break
+        # A remainder that would not make the verdict 'unexplained' -- its misfit score, projected to the
+        # data size the thresholds were calibrated at, under continue_score, and no value of the set's fit
+        # that the verdict would count as absorbing -- is what a plausible but different model leaves:
+        # nothing further is searched in it (on data under SCORE_MIN_FRAMES the search goes on).
+        score_cur = region_map(held, v_cur, levels, cal.curve, noise.tau).score
+        at_scale = scaled_score(score_cur, v_input.size)
+        if (at_scale is not None and at_scale < config.continue_score
+                and not remaining_flags(res, fit_params, params, members, outcomes, cands, g_new, start, config)):
+            say(f"what the set leaves is at the level of a plausible model's mismatch (misfit score "
+                f"{score_cur:.1f}, {at_scale:.1f} at {SCORE_SCALE_FRAMES:,} held-out frames, < "
+                f"{config.continue_score:g}; no value beyond {config.absorbed_z:g} sigmas or at a limit that "
+                f"trades off): no further effect searched")
+            break
         over_k = {"unit_values": res.unit_values, "start_model": new_model, "parameters": fit_params,
                   "stop": stop_rule(best.bic)}
         results_k = _run_tasks(_candidate_tasks(remaining, lambda e, done, o=over_k: o), payload, config.n_jobs)
@@ -1541,31 +1627,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     # A disagreement can also hide in the parameters: values of the final fit still far outside the
     # manufacturing dispersion (absorbed_z sigmas) are a disagreement that the set does not explain.
     # Only parameters beyond it in several units count (fleet_wide: one unit's outlier is a flag only).
-    n_fit_units = len(final_fit.unit_values)
-    final_flags = fleet_wide(absorbing_parameters(final_fit.unit_values, start, z_max=config.absorbed_z),
-                             n_fit_units)
-    # A fit kept within the dispersion that ends at its limit wants to go beyond it: absorbed too.
-    limit_hits = at_limit(final_fit.unit_values, [p for p in cur["params"] if dispersion_sigma(start, p.path)
-                                                  and p not in params])
-    if limit_hits:
-        at_lim = absorbing_parameters(final_fit.unit_values, start, z_max=0.0)
-        kept = {(f.unit, f.path) for f in fleet_wide([f for f in at_lim if (f.unit, f.path) in set(limit_hits)],
-                                                     n_fit_units)}
-        limit_hits = [h for h in limit_hits if h in kept]
-    if limit_hits and len(members) == 1 and not trades_off(
-            members[0], cur["gap"], [c for c in outcomes if c.effect == members[0].effect and not c.bounded
-                                     and c.tag == "1" and not c.held],
-            next(c for c in cands if c.effect == members[0].effect), config.tradeoff_tolerance):
-        say("values at the dispersion limit do not trade off against " + members[0].effect
-            + " (its free fit gives the same parameter and no better held-out gap): flagged, not absorbing")
-        exempt = set(limit_hits)
-        final_flags = tuple(f for f in final_flags if (f.unit, f.path) not in exempt)
-        limit_hits = ()
-    if limit_hits:
-        hit = set(limit_hits)
-        extra = tuple(f for f in absorbing_parameters(final_fit.unit_values, start, z_max=0.0)
-                      if (f.unit, f.path) in hit and f not in final_flags)
-        final_flags = tuple(final_flags) + extra
+    final_flags = remaining_flags(final_fit, cur["params"], params, members, outcomes, cands, cur["gap"], start,
+                                  config, say)
     verdict = verdict_of(g_after, floor, maps["augmented"].score, bool(final_flags), bool(members), config)
     unexplained = None
     probe = None
@@ -1614,4 +1677,4 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "EarlyStop", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
            "correlation_time", "effect_intervals", "excess_reduction", "find_discrepancy", "heldout_gain_robust", "heldout_likelihood_gain", "heldout_rss_by_flight", "is_eligible", "verdict_of", "noise_model", "split_fit_holdout", "trades_off",
-           "best_explanation"]
+           "best_explanation", "remaining_flags", "scaled_score"]
