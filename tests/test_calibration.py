@@ -213,3 +213,24 @@ def test_recalibration_without_n2_uses_the_documented_constant():
     assert not result.n2_measured
     assert np.allclose(result.evaluation.n2_frac, rp.ReplayConfig().n2_default_pct / 100.0)
     assert result.gap_after < 0.5 * result.gap_before
+
+
+def test_a_fit_whose_start_sits_on_a_bound_still_converges():
+    # A plausible fit starts from values clipped into a narrowed band, often on its limit. scipy's
+    # trust-region method takes its first radius from the start scaled by the distances to the bounds;
+    # with the start 1e-9 of the interval from a bound that radius was about 1e-5, the first step tiny,
+    # and the fit ended on `ftol` where it began (the LVDT lag below stayed at its 3 ms start).
+    from fuelhm_bench.calibration.fit import FitParameter, fit_joint
+
+    truth = LoopModel().with_effect("lvdt_lag", time_constant_s=0.03)
+    _, flights = _flights(truth, n_flights=1, minutes=2.0)
+    sets = {0: rp.prepare_replay(flights)}
+    start = LoopModel().with_effect("lvdt_lag", time_constant_s=0.003)
+    bias = start.servovalve.null_bias_a
+    on_bound = (FitParameter("servovalve.null_bias_a", "A", 1e-4, lower=bias, upper=bias + 1e-3),)
+    lag = (FitParameter("effect.lvdt_lag.time_constant_s", "s", 0.3, lower=1e-4, upper=0.5, log=True),)
+    fit = fit_joint({0: start}, sets, on_bound, lag, max_iterations=12)
+    assert fit.shared_values["effect.lvdt_lag.time_constant_s"] == pytest.approx(0.03, rel=0.1), fit.message
+    assert fit.passes > 4
+    # Inside the bounds, by a bounded inset: the band's own limit is still reachable.
+    assert bias <= fit.unit_values[0]["servovalve.null_bias_a"] <= bias + 1e-3

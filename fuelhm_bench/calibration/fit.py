@@ -35,6 +35,11 @@ from threadpoolctl import threadpool_limits
 from fuelhm_bench.calibration import replay as rp
 from fuelhm_bench.errors import NumericalError, ParameterError, range_error
 
+#: A fit whose start value sits on a bound starts this fraction of the search interval inside it, at
+#: most ``START_INSET_MAX`` normalised units (typical changes) (:func:`fit_joint`).
+START_INSET = 0.02
+START_INSET_MAX = 0.1
+
 
 @dataclass(frozen=True)
 class FitParameter:
@@ -377,7 +382,13 @@ def fit_joint(models: Mapping[Hashable, object], sets: Mapping[Hashable, rp.Repl
     prob = _Problem(models, sets, unit_params, shared_params, u_start, s_start, diff_step, progress)
     prob.broyden = bool(broyden)
     prob.stop = stop
-    z0 = np.clip(np.zeros(prob.lo.shape[0]), prob.lo + 1e-9 * (prob.hi - prob.lo), prob.hi - 1e-9 * (prob.hi - prob.lo))
+    # The start must lie strictly inside the bounds. Not by a hair: scipy's trust-region method takes
+    # its initial radius from the start scaled by the distances to the bounds, so a value started
+    # 1e-9 of its interval from a bound (a value clipped into a narrowed band, or left at a band's limit
+    # by an earlier fit) made the radius about 1e-5, the first step tiny, and the fit end on `ftol` at
+    # its start point (issue 14, fifteenth round: every second-round fit after a plausible member).
+    inset = np.minimum(START_INSET * (prob.hi - prob.lo), START_INSET_MAX)
+    z0 = np.clip(np.zeros(prob.lo.shape[0]), prob.lo + inset, prob.hi - inset)
     r0 = prob.fun(z0)
     if np.all(r0 == 1e3):
         raise NumericalError("The model cannot be replayed at the start values of the fit.")
