@@ -81,20 +81,23 @@ def _cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
+def _timed_workflow(benchmark, flights, config):
+    """One timed round of the workflow: (result, wall seconds, CPU seconds of this process and its workers,
+    load average at the end)."""
+    c0 = _cpu_seconds()
+    t0 = time.perf_counter()
+    result = benchmark.pedantic(find_discrepancy, args=(flights,), kwargs={"config": config}, rounds=1,
+                                iterations=1)
+    return result, time.perf_counter() - t0, _cpu_seconds() - c0, os.getloadavg()[0]
+
+
 @pytest.mark.benchmark
 def test_discrepancy_v2_on_12_altsim_flights_of_20_minutes(benchmark, alt_fleet):
     # On a shared machine the wall time measures the other users' load; the CPU time of the workflow
     # (this process + its two workers) over the two cores is what a quiet 2-core machine would take
     # at best, so both are reported and the target is checked on the CPU time / 2 as well as on the wall
     # time when the machine is quiet (load average below 2).
-    config = DiscrepancyConfig(n_jobs=2)
-    c0 = _cpu_seconds()
-    t0 = time.perf_counter()
-    result = benchmark.pedantic(find_discrepancy, args=(alt_fleet,), kwargs={"config": config}, rounds=1,
-                                iterations=1)
-    seconds = time.perf_counter() - t0
-    cpu = _cpu_seconds() - c0
-    load = os.getloadavg()[0]
+    result, seconds, cpu, load = _timed_workflow(benchmark, alt_fleet, DiscrepancyConfig(n_jobs=2))
     benchmark.extra_info.update({"seconds": seconds, "cpu_seconds": cpu, "load_average": load,
                                  "verdict": result.verdict, "target_s": TARGET_ALT_S,
                                  "set": [m.effect for m in result.effect_set]})
@@ -140,14 +143,7 @@ def study_case(request):
 @pytest.mark.benchmark
 def test_discrepancy_v2_on_the_slowest_study_cases(benchmark, study_case):
     case, flights = study_case
-    config = DiscrepancyConfig(n_jobs=2, seed=case.seed)
-    c0 = _cpu_seconds()
-    t0 = time.perf_counter()
-    result = benchmark.pedantic(find_discrepancy, args=(flights,), kwargs={"config": config}, rounds=1,
-                                iterations=1)
-    seconds = time.perf_counter() - t0
-    cpu = _cpu_seconds() - c0
-    load = os.getloadavg()[0]
+    result, seconds, cpu, load = _timed_workflow(benchmark, flights, DiscrepancyConfig(n_jobs=2, seed=case.seed))
     benchmark.extra_info.update({"case": case.name, "seconds": seconds, "cpu_seconds": cpu, "load_average": load,
                                  "verdict": result.verdict, "set": [m.effect for m in result.effect_set]})
     print(f"\ndiscrepancy v2, study case {case.name} (3 x 4 x 20 min, seeds +2000): wall {seconds:.1f} s, CPU "
