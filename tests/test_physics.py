@@ -264,6 +264,40 @@ def test_velocity_table_interpolation_error():
     assert worst < 1e-4
 
 
+def test_rod_friction_velocity_solves_the_rod_force_balance():
+    """The rod velocity with friction is the fixed point v = V(load + F(v)) of the friction-free
+    solver, or 0 when the static friction holds the rod; the spool position's metering
+    coefficients are computed once for all the forces tried (velocity_metered)."""
+    from fuelhm_bench.physics import kernel
+    from fuelhm_bench.physics.cylinder import metering_coefficients, velocity_direct, velocity_metered
+
+    model = NOMINAL.with_effect("rod_friction", coulomb_n=500.0, static_ratio=1.5, viscous_n_s_m=2e3)
+    c, k, _ = kernel.pack_model(model)
+    rng = np.random.default_rng(1)
+    smax = k[kernel.K_SSTROKE]
+    moving = stuck = 0
+    for _ in range(400):
+        xs, n2 = rng.uniform(-0.3 * smax, 0.3 * smax), rng.uniform(0.6, 1.0)
+        dps, f_load = k[kernel.K_DPS100] * n2 * n2, k[kernel.K_FAERO100] * n2 * n2
+        coeffs = metering_coefficients(xs, c)[:4]
+        for force in (f_load - 800.0, f_load, f_load + 800.0):
+            assert velocity_metered(*coeffs, dps, force, np.nan, c) == velocity_direct(xs, dps, force, np.nan, c)
+        v, _ = kernel.rod_velocity(xs, dps, f_load, np.nan, c, k)
+        if v == 0.0:
+            stuck += 1
+            # held: the static friction exceeds the net force both ways
+            assert velocity_direct(xs, dps, f_load + k[kernel.K_FS], np.nan, c)[0] <= 0.0
+            assert velocity_direct(xs, dps, f_load - k[kernel.K_FS], np.nan, c)[0] >= 0.0
+        else:
+            moving += 1
+            v_free, _ = velocity_direct(xs, dps, f_load + kernel.friction_force(v, k), np.nan, c)
+            assert v == pytest.approx(v_free, abs=1e-8)
+            # friction slows the rod: same direction as, and slower than, the friction-free rod
+            v0, _ = velocity_direct(xs, dps, f_load, np.nan, c)
+            assert v * v0 > 0.0 and abs(v) < abs(v0)
+    assert moving > 100 and stuck > 10
+
+
 def test_closed_loop_tracks_demand_and_saturates():
     inp, out = _short_flight(NOMINAL)
     err = inp.demand_m - out.true_position_m

@@ -198,6 +198,17 @@ def velocity_direct(x_s: float, dps: float, force: float, p1_guess: float, c) ->
         Head pressure at the solution [Pa] (use as the next warm start).
     """
     k_pa, k_at, k_pb, k_bt, _, _, _, _ = metering_coefficients(x_s, c)
+    return velocity_metered(k_pa, k_at, k_pb, k_bt, dps, force, p1_guess, c)
+
+
+@numba.njit(cache=True)
+def velocity_metered(k_pa: float, k_at: float, k_pb: float, k_bt: float, dps: float, force: float,
+                     p1_guess: float, c) -> tuple[float, float]:
+    """:func:`velocity_direct` for the metering coefficients of a spool position (``metering_coefficients``).
+
+    Lets a caller that solves several rod forces at one spool position (the rod friction's root
+    search) compute the coefficients once.
+    """
     pr = c[C_PR]
     ps = pr + dps
     a1 = c[C_A1]

@@ -32,7 +32,7 @@ import numba
 import numpy as np
 
 from fuelhm_bench.physics import cylinder as cyl
-from fuelhm_bench.physics.cylinder import velocity_direct
+from fuelhm_bench.physics.cylinder import metering_coefficients, velocity_direct, velocity_metered
 from fuelhm_bench.physics.lvdt import lvdt_discretization
 from fuelhm_bench.physics.servovalve import spool_advance, spool_stop
 
@@ -210,20 +210,22 @@ def rod_velocity(x_s: float, dps: float, f_load: float, p1: float, c, k) -> tupl
     if k[K_FC] <= 0.0:
         return velocity_direct(x_s, dps, f_load, p1, c)
     fs = k[K_FS]
-    v_up, p_up = velocity_direct(x_s, dps, f_load + fs, p1, c)
+    # one spool position: its metering coefficients serve every force tried
+    k_pa, k_at, k_pb, k_bt, _, _, _, _ = metering_coefficients(x_s, c)
+    v_up, p_up = velocity_metered(k_pa, k_at, k_pb, k_bt, dps, f_load + fs, p1, c)
     if v_up > 0.0:
         sgn = 1.0
     else:
-        v_dn, p_dn = velocity_direct(x_s, dps, f_load - fs, p1, c)
+        v_dn, p_dn = velocity_metered(k_pa, k_at, k_pb, k_bt, dps, f_load - fs, p1, c)
         if v_dn < 0.0:
             sgn = -1.0
         else:
             return 0.0, p_up
     # Root of g(v) = v - V(f_load + F(v)) between 0 and V(f_load +/- F_c) (Illinois).
-    v_end, p_end = velocity_direct(x_s, dps, f_load + sgn * k[K_FC], p1, c)
+    v_end, p_end = velocity_metered(k_pa, k_at, k_pb, k_bt, dps, f_load + sgn * k[K_FC], p1, c)
     a, ga = 0.0, -(v_up if sgn > 0 else v_dn)
     b = v_end
-    vb, pb = velocity_direct(x_s, dps, f_load + friction_force(b, k), p_end, c)
+    vb, pb = velocity_metered(k_pa, k_at, k_pb, k_bt, dps, f_load + friction_force(b, k), p_end, c)
     gb = b - vb
     if gb * sgn <= 0.0:
         return b, pb
@@ -231,7 +233,7 @@ def rod_velocity(x_s: float, dps: float, f_load: float, p1: float, c, k) -> tupl
     p = pb
     for _ in range(60):
         m = (a * gb - b * ga) / (gb - ga)
-        vm, p = velocity_direct(x_s, dps, f_load + friction_force(m, k), p, c)
+        vm, p = velocity_metered(k_pa, k_at, k_pb, k_bt, dps, f_load + friction_force(m, k), p, c)
         gm = m - vm
         if abs(gm) < 1e-9 or abs(b - a) < 1e-10:
             return m, p
