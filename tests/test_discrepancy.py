@@ -167,6 +167,23 @@ def test_unknown_candidate_is_refused():
         find_discrepancy(flights, config=DiscrepancyConfig(candidates=("stiction",)))
 
 
+def test_a_candidate_sets_its_effect_fields_and_the_model_parameters_its_law_uses():
+    from fuelhm_bench.calibration.candidates import candidates, parameter_key
+    from fuelhm_bench.physics.model import LoopModel
+
+    lib = candidates()
+    lap = lib["spool_overlap"]
+    keys = [parameter_key(p.path) for p in lap.parameters]
+    assert keys == ["overlap_m", "servovalve.radial_clearance_m"]
+    m = lap.apply(LoopModel(), {"overlap_m": 2e-5, "servovalve.radial_clearance_m": 1.1e-5})
+    assert m.effect("spool_overlap").overlap_m == 2e-5 and m.servovalve.radial_clearance_m == 1.1e-5
+    # every other candidate fits its effect's own fields only, each within the effect's range
+    for cand in lib.values():
+        for p in cand.parameters:
+            assert p.path.startswith(f"effect.{cand.effect}.") or p is lap.parameters[1]
+        cand.apply(LoopModel(), cand.start_values(cand.grid[0]))
+
+
 def test_draw_magnitude_is_seeded_and_in_range():
     for effect, (name, lo, hi) in TEST_RANGES.items():
         a = draw_magnitude(effect, np.random.default_rng(3))[name]

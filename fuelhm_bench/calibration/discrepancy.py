@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fuelhm_bench.calibration import replay as rp
-from fuelhm_bench.calibration.candidates import EffectCandidate, get_candidates
+from fuelhm_bench.calibration.candidates import EffectCandidate, get_candidates, parameter_key
 from fuelhm_bench.calibration.caveats import MIN_HELDOUT_FLIGHTS, data_caveats
 from fuelhm_bench.calibration.curve import CurveConfig, gap, gap_metric_text, gap_noise_floor
 from fuelhm_bench.calibration.fit import JointFit, apply_values, fit_joint
@@ -89,7 +89,7 @@ PARAMETER_UNITS: dict[str, str] = {
     "overlap_m": "m", "stiffness_ratio": "-", "command_limit_ratio": "-", "coulomb_n": "N", "static_ratio": "-",
     "stribeck_velocity_m_s": "m/s", "viscous_n_s_m": "N s/m", "time_constant_s": "s",
     "stiffness_n_m": "N/m", "reference_m": "m", "width_a": "A",
-    "leak_at_20c_m3_s_pa": "m3/(s Pa)", "slope_per_degc": "1/degC",
+    "leak_at_20c_m3_s_pa": "m3/(s Pa)", "slope_per_degc": "1/degC", "servovalve.radial_clearance_m": "m",
 }
 
 
@@ -737,7 +737,7 @@ def effect_intervals(fit: JointFit, n_eff: float, z: float = 1.96) -> dict:
             lo, hi = p.clip(p.from_z(-z * se, v)), p.clip(p.from_z(z * se, v))
         corr = np.abs(np.nan_to_num(np.asarray(ident.correlation, dtype=float)[col, :n_unit]))
         j = int(np.argmax(corr)) if n_unit else -1
-        out[p.path.rsplit(".", 1)[-1]] = {"low": lo, "high": hi,
+        out[parameter_key(p.path)] = {"low": lo, "high": hi,
                                           "max_correlation": float(corr[j]) if n_unit else 0.0,
                                           "with": names[j] if n_unit else ""}
     return out
@@ -916,10 +916,6 @@ def split_fit_holdout(flights, fraction: float = 0.3, seed: int = 0) -> tuple[li
 
 
 # --------------------------------------------------------------------------- candidates
-def _with_effect(model, cand: EffectCandidate, values: dict):
-    return model.with_effect(cand.effect, **values)
-
-
 def _rss(models: dict, sets: dict) -> float:
     vs = rp.replay_batch([models[k] for k in sets], [sets[k] for k in sets])
     total = 0.0
@@ -970,7 +966,7 @@ def _fit_candidate(cand: EffectCandidate, base_values: dict, fit_sets: dict, hel
         unit_values = {k: {p.path: p.clip(float(unit_values[k][p.path])) for p in parameters}
                        for k in base_values}
         units = {k: apply_values(start_model, unit_values[k]) for k in base_values}
-        models = {k: _with_effect(m, cand, values) for k, m in units.items()}
+        models = {k: cand.apply(m, values) for k, m in units.items()}
         rss = _rss(models, fit_sets)
         if best is None or rss < best[0]:
             best = (rss, values, unit_values, models)
@@ -981,7 +977,7 @@ def _fit_candidate(cand: EffectCandidate, base_values: dict, fit_sets: dict, hel
                                    iterations=iterations)
     res = fit_joint(models, fit_sets, parameters, cand.parameters, unit_start=unit_values,
                     shared_start=shared_start, max_iterations=iterations, broyden=BROYDEN, stop=stop)
-    fleet = apply_values(_with_effect(start_model, cand, cand.start_values({})),
+    fleet = apply_values(cand.apply(start_model, cand.start_values({})),
                          {**fleet_values(res.unit_values, parameters), **res.shared_values})
     hm = heldout_models(res.unit_models, fleet, held_sets)
     merged = merge_sets(list(held_sets.values()))
@@ -1404,7 +1400,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
             return {"unit_values": b.unit_values, "parameters": b_params,
                     "stop": stop_rule(noise.bic(b.rss, b.n_parameters)),
                     "extra_start": (res.unit_values,
-                                    {k.rsplit(".", 1)[-1]: v for k, v in res.shared_values.items()})}
+                                    {parameter_key(k): v for k, v in res.shared_values.items()})}
 
         out = {"recalibration:bounded": ((), lambda done: (_task_recalibration, (
             {"parameters": b_params, "unit_start": b_start, "max_iterations": cal.max_iterations},)), True)}
@@ -1480,7 +1476,9 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                 extra.update({"delta_bic_free": free[0] - bic,
                               "gap_reduction_free": 1.0 - g / free[1] if free[1] > 0 else 0.0,
                               "heldout_rss_reduction_free": heldout_likelihood_gain(sum(hr[0]), free[2], 1, 1.0)[0]})
-            oc = CandidateOutcome(cand.effect, dict(effect_parameters(eff_model)), bic, ref_bic - bic, res.rss,
+            fitted = {**dict(effect_parameters(eff_model)),  # and the model parameters the effect's law uses
+                      **{parameter_key(p): v for p, v in res.shared_values.items() if not p.startswith("effect.")}}
+            oc = CandidateOutcome(cand.effect, fitted, bic, ref_bic - bic, res.rss,
                                   g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag,
                                   bounded=bounded or cur_bounded[0], stopped_early=res.message == "stopped early",
                                   excess_reduction=excess_reduction(g, fl, ref_gap, ref_floor),
@@ -1560,7 +1558,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                 equivalents.append(Equivalent(best.effect, c.effect, best.gap_reduction, c.gap_reduction,
                                               best.delta_bic - c.delta_bic, separating_test(best.effect, c.effect)))
         res, g_new, cand, held_paths, fit_params = fits[(best.tag, best.label)]
-        new_model = apply_values(_with_effect(cur["model"], cand, cand.start_values({})),
+        new_model = apply_values(cand.apply(cur["model"], cand.start_values({})),
                                  {**fleet_values(res.unit_values, fit_params), **res.shared_values})
         for path in held_paths:
             new_model = new_model.with_parameters({path: start.get(path)})
