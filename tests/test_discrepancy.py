@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -144,6 +145,23 @@ def test_decision_rule():
     # Two eligible candidates: the lower BIC wins, even with a smaller held-out gain.
     assert decide([none, _outcome("rod_friction", 300.0, 0.9), _outcome("spool_overlap", 900.0, 0.5)],
                   **rule) == "spool_overlap"
+    # An overlap fitted at no lap (explaining through its clearance alone) cannot be named.
+    off = dataclasses.replace(_outcome("spool_overlap", 900.0, 0.5), effect_off=True)
+    assert decide([none, off], **rule) == "none"
+    assert decide([none, off, _outcome("rod_friction", 300.0, 0.9)], **rule) == "rod_friction"
+
+
+def test_an_effect_at_the_low_end_of_its_log_range_is_off():
+    from fuelhm_bench.calibration.candidates import candidates
+
+    lib = candidates()
+    lap = lib["spool_overlap"]
+    assert lap.is_off({"overlap_m": 1.08e-7, "servovalve.radial_clearance_m": 1.6e-5})  # healthy altsim fits
+    assert not lap.is_off({"overlap_m": 3.9e-6, "servovalve.radial_clearance_m": 1e-5})  # a 4 um lap is on
+    assert lib["rod_friction"].is_off({"coulomb_n": 1.0, "static_ratio": 2.0})
+    assert not lib["rod_friction"].is_off({"coulomb_n": 40.0, "static_ratio": 1.0})
+    # a stiffness has no "off" end (it is signed): never off
+    assert not lib["load_stiffness"].is_off({"stiffness_n_m": 0.0, "reference_m": 0.03})
 
 
 def test_too_few_flights_and_no_transient_are_refused():

@@ -52,6 +52,7 @@ stroke (1.05) and with one beyond any command (2.5); the starts lie inside the b
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from fuelhm_bench.calibration.fit import FitParameter
@@ -92,6 +93,17 @@ class EffectCandidate:
         out = model.with_effect(self.effect, **{k: v for k, v in values.items() if "." not in k})
         paths = {k: v for k, v in values.items() if "." in k}
         return out.with_parameters(paths) if paths else out
+
+
+    def is_off(self, values: dict) -> bool:
+        """Whether a fit with these values (keyed by :func:`parameter_key`) has its effect switched off:
+        every log-scaled effect parameter within one typical change of the lower end of its range
+        (those ends lie far below any visible magnitude). Such a fit explains the data through the
+        other parameters it fits (an overlap's clearance) or not at all, so it cannot name the effect.
+        An effect without a log-scaled parameter is never off."""
+        mags = [p for p in self.parameters if p.log and p.path.startswith("effect.")]
+        return bool(mags) and all(parameter_key(p.path) in values and
+                                  values[parameter_key(p.path)] <= p.lower * math.exp(p.typical) for p in mags)
 
 
 def parameter_key(path: str) -> str:

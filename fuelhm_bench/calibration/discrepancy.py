@@ -460,6 +460,9 @@ class CandidateOutcome:
         not computed).
     heldout_rss_reduction_free : float
         For a bounded fit: the held-out RSS reduction relative to the *free* recalibration [-].
+    effect_off : bool
+        The fit switched its effect off (:meth:`~fuelhm_bench.calibration.candidates.EffectCandidate.is_off`:
+        an overlap fitted at no lap, explaining through its clearance): never eligible.
     """
 
     effect: str
@@ -486,6 +489,7 @@ class CandidateOutcome:
     heldout_rss_reduction: float = float("nan")
     heldout_gain: float = float("nan")
     heldout_rss_reduction_free: float = float("nan")
+    effect_off: bool = False
 
     @property
     def label(self) -> str:
@@ -511,6 +515,7 @@ class CandidateOutcome:
             "heldout_rss_reduction": _num(self.heldout_rss_reduction),
             "heldout_loglik_gain": _num(self.heldout_gain),
             "heldout_rss_reduction_vs_free_recalibration": _num(self.heldout_rss_reduction_free),
+            "effect_off": self.effect_off,
         }
 
 
@@ -1160,8 +1165,9 @@ def is_eligible(outcome: CandidateOutcome, *, bic_threshold: float, min_gap_redu
     With ``min_heldout_rss_reduction``, the held-out condition is also met -- a second path -- by a
     sample-wise held-out RSS reduction of at least that fraction with a held-out log-likelihood gain
     above ``bic_threshold`` (:func:`heldout_likelihood_gain`); a bounded fit must then also have a lower
-    held-out RSS than the free recalibration."""
-    if outcome.effect == "none" or not outcome.delta_bic > bic_threshold:
+    held-out RSS than the free recalibration. A fit that switched its effect off (``effect_off``) is
+    never eligible."""
+    if outcome.effect == "none" or outcome.effect_off or not outcome.delta_bic > bic_threshold:
         return False
     red = outcome.gap_reduction
     if above_floor and not math.isnan(outcome.excess_reduction):
@@ -1482,14 +1488,16 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                                   g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag,
                                   bounded=bounded or cur_bounded[0], stopped_early=res.message == "stopped early",
                                   excess_reduction=excess_reduction(g, fl, ref_gap, ref_floor),
-                                  heldout_rss=hr[0], heldout_n=hr[1], heldout_floor=fl, **extra)
+                                  heldout_rss=hr[0], heldout_n=hr[1], heldout_floor=fl,
+                                  effect_off=cand.is_off(fitted), **extra)
             label = oc.label
             fits[(tag, label)] = (res, g, cand, held_paths, fit_params)
             out.append(oc)
             say(f"candidate {label}: dBIC {ref_bic - bic:.1f}, held-out gap {g:.3f} mm/s ({100 * red:+.0f} %), "
                 f"held-out RSS {100 * h_red:+.0f} % (log-likelihood {h_gain:+.0f}), "
                 f"{res.passes} replays, {sec:.1f} s" + (" (stopped early: cannot earn its parameters)"
-                                                          if oc.stopped_early else ""))
+                                                          if oc.stopped_early else "")
+                + (" (effect off: its magnitude at the low end of its range)" if oc.effect_off else ""))
         return out
 
     tau_held = correlation_time([held], [v_recal])
@@ -1635,7 +1643,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         if final_flags:
             unexplained += ("; absorbed by the recalibration: " + "; ".join(
                 f"unit {f.unit} {f.path} {f.z:+.1f} sigma" for f in final_flags))
-        partial = sorted((c for c in outcomes if c.effect != "none" and c.gap_reduction >= 0.2),
+        partial = sorted((c for c in outcomes
+                          if c.effect != "none" and not c.effect_off and c.gap_reduction >= 0.2),
                          key=lambda c: -c.gap_reduction)[:2]
         if partial:
             unexplained += ("; partial, not confident, explanations: " + "; ".join(
