@@ -94,7 +94,6 @@ class EffectCandidate:
         paths = {k: v for k, v in values.items() if "." in k}
         return out.with_parameters(paths) if paths else out
 
-
     def is_off(self, values: dict) -> bool:
         """Whether a fit with these values (keyed by :func:`parameter_key`) has its effect switched off:
         every log-scaled effect parameter within one typical change of the lower end of its range

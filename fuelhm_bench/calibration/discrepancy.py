@@ -743,8 +743,8 @@ def effect_intervals(fit: JointFit, n_eff: float, z: float = 1.96) -> dict:
         corr = np.abs(np.nan_to_num(np.asarray(ident.correlation, dtype=float)[col, :n_unit]))
         j = int(np.argmax(corr)) if n_unit else -1
         out[parameter_key(p.path)] = {"low": lo, "high": hi,
-                                          "max_correlation": float(corr[j]) if n_unit else 0.0,
-                                          "with": names[j] if n_unit else ""}
+                                      "max_correlation": float(corr[j]) if n_unit else 0.0,
+                                      "with": names[j] if n_unit else ""}
     return out
 
 
