@@ -274,6 +274,33 @@ class EchoesRow(IdleCurrent):
                         guilt=np.full(7, 1 / 7) if odd else np.zeros(7))
 
 
+class ReadsHostFiles:
+    """Tries to read the host's password hashes and an ordinary configuration file, then fails in ``fit``
+    saying what it could read (``/etc/shadow`` is readable by a harness run as root)."""
+
+    def fit(self, table, *, knowledge=None, random_state=None, raw_flights=None):
+        said = []
+        for name, what in (("/etc/shadow", "shadow"), ("/etc/passwd", "passwd")):
+            try:
+                with open(name, "rb") as f:
+                    f.read(1)
+                said.append(f"{what} ok")
+            except OSError as exc:
+                said.append(f"{what} denied {type(exc).__name__}")
+        try:
+            os.listdir("/etc")
+            said.append("listing ok")
+        except OSError:
+            said.append("listing denied")
+        raise RuntimeError("HOST " + "; ".join(said))
+
+    def start_unit(self, unit_id):
+        """Never reached: ``fit`` always raises."""
+
+    def decide(self, row):
+        return Decision(score=0.0, alarm=False, guilt=np.zeros(7))
+
+
 class ReadsEnvirons:
     """Reads every ``/proc/<pid>/environ`` it can, then fails in ``fit`` saying how many it read and how
     many hold the marker ``FUELHM_TEST_SECRET`` (a token in the environment of an automated run)."""

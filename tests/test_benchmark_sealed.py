@@ -382,6 +382,37 @@ def test_row_labels_travel_once_and_every_row_arrives_whole(evaluation, monkeypa
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux /proc")
+def test_the_system_paths_leave_out_the_hosts_secrets():
+    """``/etc`` is readable entry by entry, without the password hashes, sudo rules or SSH host keys."""
+    from fuelhm_bench.methods.sandbox import HOST_SECRETS, SYSTEM_READABLE, _inside, _readable_around
+
+    readable, listable = _readable_around(SYSTEM_READABLE, list(HOST_SECRETS))
+    for secret in HOST_SECRETS:
+        assert not any(_inside(r, secret) for r in readable), secret
+    assert "/etc" in listable and "/etc" not in readable
+    assert os.path.realpath("/etc/passwd") in readable and "/usr" in readable
+
+
+def test_a_method_cannot_read_the_hosts_secrets():
+    """A sealed method reads ordinary configuration in /etc but not /etc/shadow. Before, /etc was readable
+    whole, and a harness run as root (as CI is) let its methods read the password hashes."""
+    import pandas as pd
+
+    from fuelhm_bench.methods.sandbox import SealedFailure, SealedMethod
+    from submissions import ReadsHostFiles
+
+    with SealedMethod(ReadsHostFiles(), limits={"wall_s": 60.0}) as m:
+        with pytest.raises(SealedFailure) as info:
+            m.fit(pd.DataFrame({"I0": [0.0]}))
+        sandbox = m.sandbox
+    text = str(info.value)
+    assert "passwd ok" in text and "listing ok" in text, text
+    if sandbox.startswith("no file-system restriction"):
+        pytest.skip(f"the file system is not sealed here: {sandbox}")
+    if os.path.exists("/etc/shadow"):
+        assert "shadow denied PermissionError" in text, text
+
+
 def test_a_method_cannot_read_the_environment_of_the_harness(tmp_path):
     """The harness's environment (an automated run's tokens) is out of a sealed method's reach: the
     harness is not dumpable and the method has no capability (a harness run as root gave it

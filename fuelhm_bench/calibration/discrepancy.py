@@ -189,7 +189,8 @@ class DiscrepancyConfig:
     tradeoff_tolerance : float, default=0.1
         A value of a plausible (bounded) final fit sitting at its dispersion limit counts as absorbing
         only if it trades off against the named effect: releasing the limit (the free fit of the
-        same candidate) moves the effect's main parameter by more than this fraction, or improves
+        same candidate with the lowest BIC: the first round's, or the one refitted free from the
+        plausible fit's values) moves the effect's main parameter by more than this fraction, or improves
         the held-out gap by more than this fraction. Otherwise the limit holds structural
         mismatch that the effect's estimate does not depend on, and it stays a flag only.
     """
@@ -947,6 +948,13 @@ def heldout_rss_by_flight(held: rp.ReplaySet, v: np.ndarray) -> tuple:
     return tuple(float(x) for x in rss), tuple(int(x) for x in cnt)
 
 
+def fitted_parameters(fit: JointFit, cand: EffectCandidate) -> dict:
+    """A candidate fit's effect parameters and the model parameters its effect's law uses (fleet-wide)."""
+    eff_model = fit.unit_models[next(iter(fit.unit_models))].effect(cand.effect)
+    return {**dict(effect_parameters(eff_model)),
+            **{parameter_key(p): v for p, v in fit.shared_values.items() if not p.startswith("effect.")}}
+
+
 def _fit_candidate(cand: EffectCandidate, base_values: dict, fit_sets: dict, held_sets: dict, start_model,
                    parameters: tuple, iterations: int, curve: CurveConfig,
                    extra_start: tuple | None = None,
@@ -1196,23 +1204,45 @@ def best_explanation(eligible: Sequence[CandidateOutcome], start_model, absorbed
     return best
 
 
+def partial_explanations(outcomes: Sequence[CandidateOutcome], share: float = 0.2, n: int = 2) -> str:
+    """The ``n`` candidate fits explaining most of an ``unexplained`` remainder, in words ("" if none).
+
+    A fit counts when it closes at least ``share`` of the held-out gap or of the sample-wise held-out
+    RSS (the two held-out measures of the decision rule), relative to its reference; fits that
+    switched their effect off are left out. They are reported as partial, not confident, explanations.
+    """
+    def closed(c: CandidateOutcome) -> float:
+        return max(c.gap_reduction, -math.inf if math.isnan(c.heldout_rss_reduction) else c.heldout_rss_reduction)
+
+    partial = sorted((c for c in outcomes if c.effect != "none" and not c.effect_off and closed(c) >= share),
+                     key=lambda c: -closed(c))[:n]
+    return "; ".join(
+        f"{c.label} " + ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
+        + f" ({100 * c.gap_reduction:.0f} % of the held-out gap"
+        + ("" if math.isnan(c.heldout_rss_reduction) else f", {100 * c.heldout_rss_reduction:.0f} % of the held-out RSS")
+        + f", dBIC {c.delta_bic:.0f})" for c in partial)
+
+
 def trades_off(member: "SetMember", gap_bounded: float, free: Sequence[CandidateOutcome], cand: EffectCandidate,
                tolerance: float) -> bool:
     """Whether recalibration values sitting at their dispersion limit trade off against a named effect.
 
     The named effect was fitted with the recalibration kept within the dispersion (bounded) and
     some value ends at the band's limit. Releasing the limit is the free fit of the same candidate
-    (``free``: its outcomes). The limit trades off against the effect -- the effect's value depends
-    on where the band is cut, or the released value explains the held-out data better -- when the
-    free fit's main parameter (the candidate's first fitted one) differs from the bounded one by more
-    than ``tolerance`` (relative), or its held-out gap is smaller by more than ``tolerance``
-    (relative). Without a free fit to compare with, it is assumed to trade off.
+    (``free``: its outcomes, e.g. the first round's free fit and the fit released from the bounded
+    one's values; the one with the lowest BIC on the fit flights is the release -- a free fit that
+    ended in a poorer local minimum than the bounded optimum, which it could have reached, says
+    nothing about where the limit pulls). The limit trades off against the effect -- the effect's
+    value depends on where the band is cut, or the released value explains the held-out data
+    better -- when the release's main parameter (the candidate's first fitted one) differs from the
+    bounded one by more than ``tolerance`` (relative), or its held-out gap is smaller by more than
+    ``tolerance`` (relative). Without a free fit to compare with, it is assumed to trade off.
     """
     if not free:
         return True
     name = cand.parameters[0].path.rsplit(".", 1)[-1]
     a = float(member.parameters.get(name, float("nan")))
-    f = free[0]
+    f = min(free, key=lambda c: c.bic if math.isfinite(c.bic) else math.inf)
     b = float(f.parameters.get(name, float("nan")))
     scale = max(abs(a), abs(b))
     if not (math.isfinite(a) and math.isfinite(b)) or scale == 0.0:
@@ -1225,7 +1255,9 @@ def trades_off(member: "SetMember", gap_bounded: float, free: Sequence[Candidate
 def remaining_flags(fit: JointFit, fit_params: tuple, params: tuple, members: Sequence["SetMember"],
                     outcomes: Sequence[CandidateOutcome], cands: Sequence[EffectCandidate], gap_now: float,
                     start_model, config: DiscrepancyConfig,
-                    say: Callable[[str], None] | None = None) -> tuple[ParameterFlag, ...]:
+                    say: Callable[[str], None] | None = None,
+                    release: Callable[["SetMember"], Sequence[CandidateOutcome]] | None = None,
+                    ) -> tuple[ParameterFlag, ...]:
     """The values of a set's fit that hold a disagreement the set does not explain (the verdict's
     absorbing test, also the forward selection's stopping test).
 
@@ -1256,6 +1288,10 @@ def remaining_flags(fit: JointFit, fit_params: tuple, params: tuple, members: Se
         Settings (``absorbed_z``, ``tradeoff_tolerance``).
     say : callable, optional
         Receives the message when at-limit values are exempted.
+    release : callable, optional
+        ``release(member)``: further free fits of a one-member set's effect (its candidate refitted
+        free from the member's bounded values), compared by :func:`trades_off` with the first
+        round's free fit; called only when values sit at the limit.
 
     Returns
     -------
@@ -1273,11 +1309,11 @@ def remaining_flags(fit: JointFit, fit_params: tuple, params: tuple, members: Se
         limit_hits = [h for h in limit_hits if h in kept]
     if limit_hits and len(members) == 1 and not trades_off(
             members[0], gap_now, [c for c in outcomes if c.effect == members[0].effect and not c.bounded
-                                  and c.tag == "1" and not c.held],
+                                  and c.tag == "1" and not c.held] + list(release(members[0]) if release else ()),
             next(c for c in cands if c.effect == members[0].effect), config.tradeoff_tolerance):
         if say is not None:
             say("values at the dispersion limit do not trade off against " + members[0].effect
-                + " (its free fit gives the same parameter and no better held-out gap): flagged, not absorbing")
+                + " (released, its fit gives the same parameter and no better held-out gap): flagged, not absorbing")
         exempt = set(limit_hits)
         return tuple(f for f in flags if (f.unit, f.path) not in exempt)
     if limit_hits:
@@ -1474,7 +1510,6 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                 continue
             res, g, sec, fl, hr = round_results[cand.effect]
             bic = noise.bic(res.rss, res.n_parameters)
-            eff_model = res.unit_models[next(iter(res.unit_models))].effect(cand.effect)
             red = 1.0 - g / ref_gap if ref_gap > 0 else 0.0
             h_red, h_gain = heldout_gain_robust(hr[0], ref_rss, hr[1], tau_held)
             extra = {"heldout_rss_reduction": h_red, "heldout_gain": h_gain}
@@ -1482,8 +1517,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                 extra.update({"delta_bic_free": free[0] - bic,
                               "gap_reduction_free": 1.0 - g / free[1] if free[1] > 0 else 0.0,
                               "heldout_rss_reduction_free": heldout_likelihood_gain(sum(hr[0]), free[2], 1, 1.0)[0]})
-            fitted = {**dict(effect_parameters(eff_model)),  # and the model parameters the effect's law uses
-                      **{parameter_key(p): v for p, v in res.shared_values.items() if not p.startswith("effect.")}}
+            fitted = fitted_parameters(res, cand)
             oc = CandidateOutcome(cand.effect, fitted, bic, ref_bic - bic, res.rss,
                                   g, red, False, res.passes, sec, res.unit_values, held=held_paths, tag=tag,
                                   bounded=bounded or cur_bounded[0], stopped_early=res.message == "stopped early",
@@ -1549,6 +1583,34 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     # the BIC improves by more than the threshold and the held-out gap shrinks by min_step_reduction.
     members: list[SetMember] = []
     equivalents: list[Equivalent] = []
+    sources: dict = {}  # effect -> the outcome it was selected from
+    released: dict = {}  # effect -> (its fit released from a plausible member's values,)
+
+    def release(member: SetMember) -> tuple:
+        """A plausible member's candidate refitted free, started from the member's own values (cached).
+
+        The first round's free fit of the same candidate started from the free recalibration and may
+        end in a poorer local minimum than the plausible optimum (the 15 um altsim lap: BIC 44 worse,
+        its lap 24 % lower); this fit starts where the plausible one ended, so its RSS is no higher.
+        """
+        src = sources.get(member.effect)
+        if src is None or not src.bounded:
+            return ()
+        if member.effect not in released:
+            cand = next(c for c in cands if c.effect == member.effect)
+            res, g, sec, fl, hr = _fit_candidate(cand, src.unit_values, fit_sets, held_sets, start, params,
+                                                 config.candidate_iterations, cal.curve,
+                                                 extra_start=(src.unit_values, dict(src.parameters)))
+            fitted = fitted_parameters(res, cand)
+            oc = CandidateOutcome(cand.effect, fitted, noise.bic(res.rss, res.n_parameters), float("nan"), res.rss,
+                                  g, float("nan"), False, res.passes, sec, res.unit_values, tag="release",
+                                  heldout_rss=hr[0], heldout_n=hr[1], heldout_floor=fl)
+            say(f"{member.effect} released from its plausible fit: "
+                + ", ".join(f"{k}={v:.3g}" for k, v in fitted.items())
+                + f", held-out gap {g:.3f} mm/s, BIC {oc.bic:.1f} ({res.passes} replays, {sec:.1f} s)")
+            released[member.effect] = (oc,)
+        return released[member.effect]
+
     fleet_models = {k: (base.unit_models.get(k, fleet0)) for k in held_sets}
     levels = sample_levels(held, fleet_models,
                            lambda fi: NO_UNIT if held.unit_ids[fi] is None else held.unit_ids[fi])
@@ -1570,6 +1632,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                                  {**fleet_values(res.unit_values, fit_params), **res.shared_values})
         for path in held_paths:
             new_model = new_model.with_parameters({path: start.get(path)})
+        sources[best.effect] = best
         members.append(SetMember(best.effect, dict(best.parameters), held_paths, cur["gap"], g_new,
                                  cur["bic"] - best.bic, intervals=effect_intervals(res, noise.n_eff)))
         say(f"selected {best.label} (round {round_no}): held-out gap {cur['gap']:.3f} -> {g_new:.3f} mm/s")
@@ -1591,7 +1654,8 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         score_cur = region_map(held, v_cur, levels, cal.curve, noise.tau).score
         at_scale = scaled_score(score_cur, v_input.size)
         if (at_scale is not None and at_scale < config.continue_score
-                and not remaining_flags(res, fit_params, params, members, outcomes, cands, g_new, start, config)):
+                and not remaining_flags(res, fit_params, params, members, outcomes, cands, g_new, start, config,
+                                        release=release)):
             say(f"what the set leaves is at the level of a plausible model's mismatch (misfit score "
                 f"{score_cur:.1f}, {at_scale:.1f} at {SCORE_SCALE_FRAMES:,} held-out frames, < "
                 f"{config.continue_score:g}; no value beyond {config.absorbed_z:g} sigmas or at a limit that "
@@ -1634,7 +1698,7 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     # manufacturing dispersion (absorbed_z sigmas) are a disagreement that the set does not explain.
     # Only parameters beyond it in several units count (fleet_wide: one unit's outlier is a flag only).
     final_flags = remaining_flags(final_fit, cur["params"], params, members, outcomes, cands, cur["gap"], start,
-                                  config, say)
+                                  config, say, release=release)
     verdict = verdict_of(g_after, floor, maps["augmented"].score, bool(final_flags), bool(members), config)
     unexplained = None
     probe = None
@@ -1643,13 +1707,9 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
         if final_flags:
             unexplained += ("; absorbed by the recalibration: " + "; ".join(
                 f"unit {f.unit} {f.path} {f.z:+.1f} sigma" for f in final_flags))
-        partial = sorted((c for c in outcomes
-                          if c.effect != "none" and not c.effect_off and c.gap_reduction >= 0.2),
-                         key=lambda c: -c.gap_reduction)[:2]
+        partial = partial_explanations(outcomes)
         if partial:
-            unexplained += ("; partial, not confident, explanations: " + "; ".join(
-                f"{c.label} " + ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
-                + f" ({100 * c.gap_reduction:.0f} % of the held-out gap, dBIC {c.delta_bic:.0f})" for c in partial))
+            unexplained += "; partial, not confident, explanations: " + partial
         say(f"unexplained: {unexplained}")
         probe_fit, probe_model, v_probe = final_fit, final_model, v_after
         if final_flags:
@@ -1684,4 +1744,4 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "EarlyStop", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
            "correlation_time", "effect_intervals", "excess_reduction", "find_discrepancy", "heldout_gain_robust", "heldout_likelihood_gain", "heldout_rss_by_flight", "is_eligible", "verdict_of", "noise_model", "split_fit_holdout", "trades_off",
-           "best_explanation", "remaining_flags", "scaled_score"]
+           "best_explanation", "fitted_parameters", "partial_explanations", "remaining_flags", "scaled_score"]

@@ -236,9 +236,8 @@ class _Child:
         import fuelhm_bench.methods  # noqa: F401
         from fuelhm_bench.methods.loading import accepted_params, load_method
 
-        sandbox = _landlock(p["readable"] + ["/usr", "/lib", "/lib64", "/etc", "/proc", "/sys", "/dev/urandom",
-                                             "/dev/null", "/dev/zero"],
-                            [p["scratch"], "/dev/null", *_SHARED_MEMORY], p.get("listable", []))
+        # p["readable"] holds the system paths too (sandbox.SYSTEM_READABLE, without the host's secrets)
+        sandbox = _landlock(p["readable"], [p["scratch"], "/dev/null", *_SHARED_MEMORY], p.get("listable", []))
         network = _seccomp_no_inet()
         sandbox += f"; {network}" if network else "; IPv4/IPv6 sockets not filtered (no seccomp here)"
         dropped = _drop_capabilities()

@@ -27,7 +27,8 @@ The isolation model (also in docs/methods.md):
   privilege needed) the child restricts itself before importing the method: it
   may read the Python installation, the directories on its import path that do
   not contain a denied path (the simulation cache, the output folder), the
-  method's own source directory and system directories; it may write only its
+  method's own source directory and system directories (``/etc`` without the
+  host's secrets, :data:`HOST_SECRETS`); it may write only its
   scratch directory; TCP ``bind``/``connect`` and signals to processes outside
   its sandbox are refused (Landlock ABI >= 4 and >= 6). Without Landlock the
   child still never holds ground truth in memory, but the file system is not
@@ -234,6 +235,16 @@ def _imported_roots() -> list[str]:
             p = Path(origin)
             roots.append(str(p.parent if p.name == "__init__.py" else p))
     return roots
+
+
+#: System paths a sealed method may read (shared libraries, configuration, ``/proc``, random numbers).
+SYSTEM_READABLE = ("/usr", "/lib", "/lib64", "/etc", "/proc", "/sys", "/dev/urandom", "/dev/null", "/dev/zero")
+#: Host secrets beneath :data:`SYSTEM_READABLE` that no method reads: password hashes (readable by a harness
+#: run as root, whose owner read bit needs no capability), sudo rules, SSH host keys, TLS private keys,
+#: old passwords, systemd credentials. Denied like the simulation cache (:func:`_readable_around`).
+HOST_SECRETS = ("/etc/shadow", "/etc/shadow-", "/etc/gshadow", "/etc/gshadow-", "/etc/sudoers", "/etc/sudoers.d",
+                "/etc/ssh", "/etc/ssl/private", "/etc/security/opasswd", "/etc/credstore",
+                "/etc/credstore.encrypted")
 
 
 def _python_roots() -> list[str]:
@@ -617,7 +628,8 @@ class SealedMethod:
         readable += [p for p in path if os.path.isdir(p)]
         if not isinstance(self.method, str):  # an instance: the packages its module needed are imported here
             readable += [r for r in _imported_roots() if not any(self._contains(d, r) for d in self.deny)]
-        readable, listable = _readable_around(dict.fromkeys(readable), self.deny)
+        readable, listable = _readable_around(dict.fromkeys([*readable, *SYSTEM_READABLE]),
+                                              [*self.deny, *HOST_SECRETS])
         method = self.method
         if not isinstance(method, str):  # by value when its class is not importable (a notebook, a script)
             try:
