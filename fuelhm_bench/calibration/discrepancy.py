@@ -691,6 +691,11 @@ class SetMember:
     intervals : dict
         Per fitted effect parameter, :func:`effect_intervals` of its fit: approximate 95 % interval
         and the recalibration value it trades off against most.
+    release : dict or None
+        For a member fitted within the dispersion with values at the limit: the same candidate
+        refitted free from the member's values (``parameters``, ``gap_after``, ``bic``), which free
+        fit the trade-off test used (``compared_with``: ``"release"`` or ``"first round"``, the lower
+        BIC) and its answer (``trades_off``; :func:`trades_off`). None when no release was needed.
     """
 
     effect: str
@@ -701,13 +706,17 @@ class SetMember:
     delta_bic: float
     share: float = float("nan")
     intervals: dict = field(default_factory=dict)
+    release: dict | None = None
 
     def as_json(self) -> dict:
         """JSON-ready summary."""
         return {"effect": self.effect,
                 "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")} for k, v in self.parameters.items()},
                 "held_at_nominal": list(self.held), "gap_before": self.gap_before, "gap_after": self.gap_after,
-                "delta_bic": self.delta_bic, "share": self.share, "intervals": self.intervals}
+                "delta_bic": self.delta_bic, "share": self.share, "intervals": self.intervals,
+                "release": None if self.release is None else {
+                    **self.release, "parameters": {k: {"value": v, "unit": PARAMETER_UNITS.get(k, "")}
+                                                   for k, v in self.release["parameters"].items()}}}
 
 
 def effect_intervals(fit: JointFit, n_eff: float, z: float = 1.96) -> dict:
@@ -1699,6 +1708,15 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
     # Only parameters beyond it in several units count (fleet_wide: one unit's outlier is a flag only).
     final_flags = remaining_flags(final_fit, cur["params"], params, members, outcomes, cands, cur["gap"], start,
                                   config, say, release=release)
+    if len(members) == 1 and released.get(members[0].effect):  # what the trade-off test compared (JSON)
+        rel = released[members[0].effect][0]
+        free = [c for c in outcomes if c.effect == rel.effect and not c.bounded and c.tag == "1" and not c.held]
+        used = min([*free, rel], key=lambda c: c.bic if math.isfinite(c.bic) else math.inf)
+        members[0] = dataclasses.replace(members[0], release={
+            "parameters": dict(rel.parameters), "gap_after": rel.gap_after, "bic": rel.bic,
+            "compared_with": "release" if used is rel else "first round",
+            "trades_off": trades_off(members[0], cur["gap"], [*free, rel],
+                                     next(c for c in cands if c.effect == rel.effect), config.tradeoff_tolerance)})
     verdict = verdict_of(g_after, floor, maps["augmented"].score, bool(final_flags), bool(members), config)
     unexplained = None
     probe = None
