@@ -1232,6 +1232,16 @@ def partial_explanations(outcomes: Sequence[CandidateOutcome], share: float = 0.
         + f", dBIC {c.delta_bic:.0f})" for c in partial)
 
 
+def first_round_free_fits(outcomes: Sequence[CandidateOutcome], effect: str) -> list[CandidateOutcome]:
+    """The first round's free fit(s) of an effect: not bounded, nothing held."""
+    return [c for c in outcomes if c.effect == effect and not c.bounded and c.tag == "1" and not c.held]
+
+
+def lowest_bic(fits: Sequence[CandidateOutcome]) -> CandidateOutcome:
+    """The fit with the lowest BIC on the fit flights (a NaN BIC counts as the worst)."""
+    return min(fits, key=lambda c: c.bic if math.isfinite(c.bic) else math.inf)
+
+
 def trades_off(member: "SetMember", gap_bounded: float, free: Sequence[CandidateOutcome], cand: EffectCandidate,
                tolerance: float) -> bool:
     """Whether recalibration values sitting at their dispersion limit trade off against a named effect.
@@ -1251,7 +1261,7 @@ def trades_off(member: "SetMember", gap_bounded: float, free: Sequence[Candidate
         return True
     name = cand.parameters[0].path.rsplit(".", 1)[-1]
     a = float(member.parameters.get(name, float("nan")))
-    f = min(free, key=lambda c: c.bic if math.isfinite(c.bic) else math.inf)
+    f = lowest_bic(free)
     b = float(f.parameters.get(name, float("nan")))
     scale = max(abs(a), abs(b))
     if not (math.isfinite(a) and math.isfinite(b)) or scale == 0.0:
@@ -1317,8 +1327,8 @@ def remaining_flags(fit: JointFit, fit_params: tuple, params: tuple, members: Se
                                                      n_fit_units)}
         limit_hits = [h for h in limit_hits if h in kept]
     if limit_hits and len(members) == 1 and not trades_off(
-            members[0], gap_now, [c for c in outcomes if c.effect == members[0].effect and not c.bounded
-                                  and c.tag == "1" and not c.held] + list(release(members[0]) if release else ()),
+            members[0], gap_now,
+            first_round_free_fits(outcomes, members[0].effect) + list(release(members[0]) if release else ()),
             next(c for c in cands if c.effect == members[0].effect), config.tradeoff_tolerance):
         if say is not None:
             say("values at the dispersion limit do not trade off against " + members[0].effect
@@ -1710,12 +1720,11 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
                                   config, say, release=release)
     if len(members) == 1 and released.get(members[0].effect):  # what the trade-off test compared (JSON)
         rel = released[members[0].effect][0]
-        free = [c for c in outcomes if c.effect == rel.effect and not c.bounded and c.tag == "1" and not c.held]
-        used = min([*free, rel], key=lambda c: c.bic if math.isfinite(c.bic) else math.inf)
+        free = [*first_round_free_fits(outcomes, rel.effect), rel]
         members[0] = dataclasses.replace(members[0], release={
             "parameters": dict(rel.parameters), "gap_after": rel.gap_after, "bic": rel.bic,
-            "compared_with": "release" if used is rel else "first round",
-            "trades_off": trades_off(members[0], cur["gap"], [*free, rel],
+            "compared_with": "release" if lowest_bic(free) is rel else "first round",
+            "trades_off": trades_off(members[0], cur["gap"], free,
                                      next(c for c in cands if c.effect == rel.effect), config.tradeoff_tolerance)})
     verdict = verdict_of(g_after, floor, maps["augmented"].score, bool(final_flags), bool(members), config)
     unexplained = None
@@ -1762,4 +1771,4 @@ def find_discrepancy(flights, model=None, *, config: DiscrepancyConfig = Discrep
 __all__ = ["CandidateOutcome", "DiscrepancyConfig", "EarlyStop", "DiscrepancyResult", "Equivalent", "NoiseModel", "ParameterFlag",
            "SEPARATING_TESTS", "SetMember", "decide", "describe_remainder", "separating_test",
            "correlation_time", "effect_intervals", "excess_reduction", "find_discrepancy", "heldout_gain_robust", "heldout_likelihood_gain", "heldout_rss_by_flight", "is_eligible", "verdict_of", "noise_model", "split_fit_holdout", "trades_off",
-           "best_explanation", "fitted_parameters", "partial_explanations", "remaining_flags", "scaled_score"]
+           "best_explanation", "first_round_free_fits", "fitted_parameters", "lowest_bic", "partial_explanations", "remaining_flags", "scaled_score"]
